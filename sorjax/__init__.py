@@ -1,0 +1,26 @@
+"""sorjax: camera calibration from the outlines of surfaces of revolution, in JAX.
+
+After K.-Y. K. Wong, P. R. S. Mendonca and R. Cipolla, "Camera Calibration from
+Surfaces of Revolution", IEEE TPAMI 25(2), 2003.  Pixels follow OpenCV: the centre of
+the top-left pixel is (0, 0), x to the right, y down.  Everything runs in float64.
+"""
+
+import jax as _jax
+
+_jax.config.update("jax_enable_x64", True)
+
+from ._calibration import RESULTS, Calibration, CalibrationError, calibrate  # noqa: E402
+from ._homology import Homology, fit_homology, homology_matrix  # noqa: E402
+from ._outline import Outline, make_outline  # noqa: E402
+
+__all__ = [
+    "RESULTS",
+    "Calibration",
+    "CalibrationError",
+    "Homology",
+    "Outline",
+    "calibrate",
+    "fit_homology",
+    "homology_matrix",
+    "make_outline",
+]

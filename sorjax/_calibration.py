@@ -1,0 +1,177 @@
+"""From outlines to intrinsics: the :class:`Calibration` result and :func:`calibrate`.
+
+Data flow (the paper's): outlines -> per-view harmonic homologies (eq. 20) ->
+Method I / IIa / IIb in normalised coordinates -> K in pixels.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ._camera import intrinsics_matrix, normalising_transform, omega_vector_from_intrinsics, omega_matrix
+from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
+from ._linear import method_i, method_ii
+from ._outline import DEFAULT_POINTS, as_outlines
+
+METHODS = ("I", "IIa", "IIb")
+
+
+class RESULTS(eqx.Enumeration):
+    """Result codes of a calibration (in the style of ``optimistix.RESULTS``)."""
+
+    successful = ""
+    not_positive_definite = (
+        "The image of the absolute conic estimated from these views is not positive "
+        "definite: no real camera agrees with them. The views are too noisy or too "
+        "few, or an outline is not a surface of revolution. Add views with stronger "
+        "perspective (objects off-centre, seen from above or below)."
+    )
+    degenerate = (
+        "The views do not determine the intrinsics with this method (e.g. fewer than two "
+        "views with a finite vanishing point, or parallel constraint lines). Add views "
+        "with the object placed elsewhere in the image or tilted differently."
+    )
+
+
+class CalibrationError(RuntimeError):
+    """Raised by ``calibrate(..., throw=True)`` when the calibration did not succeed."""
+
+
+class Calibration(eqx.Module):
+    """Estimated intrinsics of a zero-skew pinhole camera.
+
+    Attributes:
+        K: (3, 3) intrinsics in pixels (NaN entries when not successful).
+        omega: (3, 3) image of the absolute conic ``K^-T K^-1`` (pixels), as estimated.
+        method: "I", "IIa" or "IIb".
+        homologies: the per-view :class:`Homology` fits (pixels).
+        result: a :class:`RESULTS` code; ``success`` is ``result == successful``.
+    """
+
+    K: Float[Array, "3 3"]
+    omega: Float[Array, "3 3"]
+    homologies: tuple[Homology, ...]
+    result: RESULTS
+    method: str = eqx.field(static=True)
+
+    @property
+    def fu(self) -> float:
+        return float(self.K[0, 0])
+
+    @property
+    def fv(self) -> float:
+        return float(self.K[1, 1])
+
+    @property
+    def u0(self) -> float:
+        return float(self.K[0, 2])
+
+    @property
+    def v0(self) -> float:
+        return float(self.K[1, 2])
+
+    @property
+    def success(self) -> bool:
+        return bool(self.result == RESULTS.successful)
+
+    @property
+    def message(self) -> str:
+        return RESULTS[self.result]
+
+    def __array__(self, dtype=None, copy=None):
+        return np.asarray(self.K, dtype=dtype)
+
+
+def _check_method(method: str, aspect_ratio):
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(map(repr, METHODS))}; got {method!r}.")
+    if aspect_ratio is not None:
+        if not isinstance(aspect_ratio, (int, float, np.floating, np.integer)) or not (
+            math.isfinite(aspect_ratio) and aspect_ratio > 0
+        ):
+            raise ValueError(f"aspect_ratio must be a positive finite number (fu / fv); got {aspect_ratio!r}.")
+        if method == "IIa":
+            raise ValueError(
+                "method 'IIa' estimates the aspect ratio itself; to impose a known aspect "
+                "ratio use method='IIb' (or 'I') with aspect_ratio=..."
+            )
+
+
+def linear_calibration(homologies, method: str, T: np.ndarray, aspect_ratio=None, weights=None):
+    """Run a linear method on fitted homologies (pixels).  Returns ``(K, omega, code)``.
+
+    ``T`` is the isotropic normalising similarity of the pixels (e.g.
+    :func:`sorjax._camera.normalising_transform` of all outline points)."""
+    a = 1.0 if aspect_ratio is None else float(aspect_ratio)
+    A = np.diag([1.0 / a, 1.0, 1.0])
+    v = np.stack([np.asarray(h.v_x) for h in homologies]) @ (T @ A).T
+    l = np.stack([np.asarray(h.l_s) for h in homologies]) @ np.linalg.inv(T @ A)
+    v, l = jnp.asarray(v), jnp.asarray(l)
+    if method == "I":
+        fu, fv, u0, v0, ok = method_i(v, l)
+        code = RESULTS.where(ok, RESULTS.successful, RESULTS.degenerate)
+    else:
+        fu, fv, u0, v0, ok, _ = method_ii(v, l, unit_aspect=(method == "IIb"), weights=weights)
+        code = RESULTS.where(ok, RESULTS.successful, RESULTS.not_positive_definite)
+    Kn = intrinsics_matrix(fu, fv, u0, v0)
+    K = jnp.asarray(np.linalg.inv(A) @ np.linalg.inv(T)) @ Kn
+    omega_n = omega_matrix(omega_vector_from_intrinsics(fu, fv, u0, v0))
+    TA = jnp.asarray(T @ A)
+    omega = TA.T @ omega_n @ TA
+    return K, omega, code
+
+
+def calibrate(
+    outlines,
+    method: str = "IIb",
+    aspect_ratio: float | None = None,
+    *,
+    n_samples: int = DEFAULT_SAMPLES,
+    n_points: int = DEFAULT_POINTS,
+    homologies=None,
+    throw: bool = False,
+) -> Calibration:
+    """Calibrate a camera from the outlines of surfaces of revolution.
+
+    Args:
+        outlines: one closed outline per view, each an (N, 2) array of pixel
+            coordinates (OpenCV convention) or an :class:`Outline`; at least two.
+        method: "I" (zero skew, unit or known aspect ratio; eqs. 21-26), "IIa" (zero
+            skew, free aspect ratio; eqs. 27-28) or "IIb" (IIa with ``fu = a fv``,
+            ``a`` = 1 unless ``aspect_ratio`` says otherwise).
+        aspect_ratio: known ``fu / fv`` for "I" and "IIb" (default 1).
+        n_samples: samples per outline in the homology fit (eq. 20).
+        n_points: resampled outline size for the distance fields.
+        homologies: optional precomputed per-view :class:`Homology` fits.
+        throw: raise :class:`CalibrationError` instead of returning a failed result.
+
+    Returns:
+        :class:`Calibration` with ``K`` (pixels) and a result code.
+    """
+    _check_method(method, aspect_ratio)
+    outs = as_outlines(outlines, n_points)
+    if len(outs) < 2:
+        raise ValueError(
+            f"calibration needs at least two outlines (views) of surfaces of revolution; got "
+            f"{len(outs)}. One outline gives only its own axis l_s and vanishing point v_x "
+            "(use sorjax.fit_homology), i.e. two of the four intrinsics' constraints."
+        )
+    if homologies is None:
+        homologies = tuple(fit_homology(o, n_samples=n_samples, n_points=n_points) for o in outs)
+    elif len(homologies) != len(outs):
+        raise ValueError(f"got {len(homologies)} homologies for {len(outs)} outlines.")
+    for i, h in enumerate(homologies):
+        if not bool(h.converged):
+            warnings.warn(f"view {i}: the homology fit did not converge (rms {float(h.rms):.3g} px).", stacklevel=2)
+    T = normalising_transform(np.concatenate([np.asarray(o.points) for o in outs]))
+    K, omega, code = linear_calibration(homologies, method, T, aspect_ratio)
+    cal = Calibration(K=K, omega=omega, homologies=tuple(homologies), result=code, method=method)
+    if throw and not cal.success:
+        raise CalibrationError(cal.message)
+    return cal

@@ -1,0 +1,142 @@
+"""A smooth (C^2 curve, C^1 field) signed distance to a closed outline.
+
+The outline's ``M`` evenly spaced points ``X_i`` are interpolated by a periodic
+uniform cubic B-spline ``c(t)``, ``t in [0, M)``, with control points ``P`` solving
+the circulant system ``(P_{i-1} + 4 P_i + P_{i+1}) / 6 = X_i`` (by FFT, so building
+the field is differentiable in the outline points).  On segment ``i`` with
+``u = t - i``::
+
+    c(u) = [(1-u)^3 P_{i-1} + (3u^3 - 6u^2 + 4) P_i + (-3u^3 + 3u^2 + 3u + 1) P_{i+1}
+            + u^3 P_{i+2}] / 6.
+
+The signed distance of a point ``x`` (pixels, or whatever units the points are in) is
+``d(x) = (x - c(t*)) . n(t*)`` with ``t*`` the closest-point parameter and ``n`` the
+outward unit normal (positive outside the outline).  ``t*`` is found by a coarse-to-fine
+search over the ``M`` knots followed by a few safeguarded Newton steps on
+``|x - c(t)|^2``, all under ``stop_gradient``: at the closest point ``x - c`` is
+normal to the curve, so ``d d / d x = n(t*)`` exactly (envelope theorem) and the
+derivatives with respect to the outline points are also exact to first order.  The
+field is therefore C^1 wherever the closest point is unique (everywhere within the
+curve's smallest radius of curvature, e.g. within 5 px of any outline that is not
+sharper than that), with no kinks at the knots.
+
+Optionally the points are first smoothed along the curve by a circular Gaussian of
+``smooth`` samples, which suppresses the target outline's own noise (it shrinks a
+curve of radius R by about ``smooth_px^2 / (2 R)``).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+NEWTON_STEPS = 4
+
+
+class DistanceField(eqx.Module):
+    """Periodic cubic B-spline of an outline; call :func:`signed_distance` on it."""
+
+    control: Float[Array, "M 2"]
+    knots: Float[Array, "M 2"]  # c(i), the interpolated points
+
+    @property
+    def n_knots(self) -> int:
+        return self.control.shape[-2]
+
+
+def gaussian_smooth_closed(points: Float[Array, "M 2"], sigma_samples) -> Float[Array, "M 2"]:
+    """Circular Gaussian smoothing of a closed curve's points (FFT; ``sigma`` in samples)."""
+    m = points.shape[-2]
+    k = jnp.fft.rfftfreq(m)  # cycles per sample
+    gain = jnp.exp(-2.0 * (jnp.pi * k * sigma_samples) ** 2)
+    return jnp.fft.irfft(jnp.fft.rfft(points, axis=-2) * gain[:, None], n=m, axis=-2)
+
+
+def make_field(points: Float[Array, "M 2"], smooth_samples: float = 0.0) -> DistanceField:
+    """Build the field from ``M`` evenly spaced outline points (jit/vmap/grad-clean)."""
+    points = jnp.asarray(points, dtype=jnp.float64)
+    if smooth_samples:
+        points = gaussian_smooth_closed(points, smooth_samples)
+    m = points.shape[-2]
+    k = jnp.arange(m // 2 + 1)
+    eig = (4.0 + 2.0 * jnp.cos(2.0 * jnp.pi * k / m)) / 6.0
+    control = jnp.fft.irfft(jnp.fft.rfft(points, axis=-2) / eig[:, None], n=m, axis=-2)
+    return DistanceField(control, points)
+
+
+def _basis(u):
+    """Cubic B-spline basis values, first and second derivatives at ``u`` in [0, 1)."""
+    b = jnp.stack([(1 - u) ** 3, 3 * u**3 - 6 * u**2 + 4, -3 * u**3 + 3 * u**2 + 3 * u + 1, u**3]) / 6
+    db = jnp.stack([-3 * (1 - u) ** 2, 9 * u**2 - 12 * u, -9 * u**2 + 6 * u + 3, 3 * u**2]) / 6
+    ddb = jnp.stack([6 * (1 - u), 18 * u - 12, -18 * u + 6, 6 * u]) / 6
+    return b, db, ddb
+
+
+def curve(field: DistanceField, t):
+    """``(c(t), c'(t), c''(t))`` for a scalar parameter ``t`` (knot units, periodic)."""
+    m = field.n_knots
+    t = jnp.mod(t, m)
+    i = jnp.floor(t)
+    u = t - i
+    idx = (i.astype(jnp.int32) + jnp.arange(-1, 3)) % m
+    p = field.control[idx]  # (4, 2)
+    b, db, ddb = _basis(u)
+    return b @ p, db @ p, ddb @ p
+
+
+def _nearest_knot(field: DistanceField, x: Float[Array, "2"]) -> Float[Array, ""]:
+    """Index of the knot nearest to ``x``: a coarse pass over every ``s``-th knot
+    (``s ~ sqrt(M / 2)``), then an exact pass over the ``2 s + 1`` knots around each
+    of the two best coarse knots (two, so that thin parts of a shape, a stem or a
+    neck, do not send the search to the wrong side)."""
+    m = field.n_knots
+    s = max(1, int(round((m / 2) ** 0.5)))
+    if m <= 128:
+        return jnp.argmin(jnp.sum((field.knots - x) ** 2, axis=-1))
+    coarse = field.knots[::s]
+    dc = jnp.sum((coarse - x) ** 2, axis=-1)
+    _, best = jax.lax.top_k(-dc, 2)
+    idx = (best[:, None] * s + jnp.arange(-s, s + 1)[None, :]).reshape(-1) % m
+    d2 = jnp.sum((field.knots[idx] - x) ** 2, axis=-1)
+    return idx[jnp.argmin(d2)]
+
+
+def closest_parameter(field: DistanceField, x: Float[Array, "2"]) -> Float[Array, ""]:
+    """Parameter ``t*`` of the point of the curve closest to ``x`` (no gradient)."""
+    field = jax.lax.stop_gradient(field)
+    x = jax.lax.stop_gradient(x)
+    t = _nearest_knot(field, x).astype(jnp.float64)
+
+    def newton(t, _):
+        c, dc, ddc = curve(field, t)
+        r = x - c
+        g = -r @ dc
+        h = dc @ dc - r @ ddc
+        h = jnp.maximum(h, 0.25 * (dc @ dc))
+        return t - jnp.clip(g / h, -1.0, 1.0), None
+
+    t, _ = jax.lax.scan(newton, t, None, length=NEWTON_STEPS)
+    return t
+
+
+def signed_distance(field: DistanceField, x: Float[Array, "2"]) -> Float[Array, ""]:
+    """Signed distance from ``x`` to the outline: positive outside, negative inside,
+    in the units of the outline's points.  Differentiable in ``x`` and in the field."""
+    t = closest_parameter(field, x)
+    c, dc, _ = curve(field, t)
+    n = jnp.stack([dc[1], -dc[0]]) / jnp.linalg.norm(dc)
+    return (x - c) @ n
+
+
+def signed_distances(field: DistanceField, x: Float[Array, "N 2"]) -> Float[Array, "N"]:
+    """:func:`signed_distance` for a batch of points."""
+    return jax.vmap(signed_distance, in_axes=(None, 0))(field, x)
+
+
+def curve_points(field: DistanceField, n: int) -> Float[Array, "n 2"]:
+    """``n`` points of the spline at evenly spaced parameters ``t_k = k M / n``
+    (evenly spaced in arc length to the accuracy of the knots' spacing)."""
+    t = jnp.arange(n) * (field.n_knots / n)
+    return jax.vmap(lambda s: curve(field, s)[0])(t)

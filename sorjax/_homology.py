@@ -1,0 +1,339 @@
+"""Harmonic homologies of surface-of-revolution outlines and their per-view fit.
+
+The outline of a surface of revolution is mapped onto itself by the harmonic homology
+(the paper's eq. 11)::
+
+    W(v, l) = I - 2 v l^T / (v^T l)
+
+with axis ``l = l_s`` (the image of the revolution axis) and vertex ``v = v_x``.  W is
+an involution, fixes every point of ``l_s`` and has 4 degrees of freedom.
+
+Per view we minimise the paper's eq. 20::
+
+    Cost(v, l) = sum_i d(W(v, l) x_i)^2
+
+over ``N`` samples ``x_i`` evenly spaced along the outline, ``d`` being the signed
+orthogonal distance to the outline (:mod:`sorjax._field`).  The fit runs in
+per-view normalised coordinates (centroid at the origin, RMS radius sqrt 2) with the
+parameters ``p = (theta, rho, d1, d2)``::
+
+    l = (cos theta, sin theta, -rho),     v = normalise(v0 + d1 e1 + d2 e2),
+
+``v0`` the starting vertex (unit 3-vector) and ``e1, e2`` an orthonormal basis of its
+tangent plane on the sphere: a chart that stays well conditioned when ``v_x`` goes to
+infinity (``v`` then has a vanishing third coordinate, nothing diverges).
+
+Initialisation is automatic (the paper picked bitangents by hand):
+
+* bitangents of the convex hull: every pair of concavities ("pockets" between the
+  outline and its hull) gives bitangents ``l_b, l_b'`` touching at ``x1, x2`` and
+  ``x1', x2'``; then ``v_x = (x1 x x1') x (x2 x x2')`` and ``l_s`` joins
+  ``l_b x l_b'`` and ``(x1 x x2') x (x1' x x2)`` (paper, Section 5.1);
+* a symmetry-axis search: mirror symmetries (``v`` at infinity orthogonal to ``l``)
+  over a grid of axis directions and offsets, the best few local minima kept;
+
+every candidate is refined by Levenberg-Marquardt (optimistix) and the one with the
+lowest cost wins.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Bool, Float, Int
+
+from ._camera import normalising_transform, transform_points
+from ._field import DistanceField, curve_points, make_field, signed_distances
+from ._outline import DEFAULT_POINTS, Outline, make_outline
+
+DEFAULT_SAMPLES = 100
+_GRID_DIRECTIONS = 48
+_GRID_OFFSETS = (-0.3, -0.15, 0.0, 0.15, 0.3)
+
+
+class Homology(eqx.Module):
+    """A fitted harmonic homology of one outline (pixels).
+
+    Attributes:
+        l_s: image of the revolution axis, homogeneous line with ``a^2 + b^2 = 1``.
+        v_x: vertex (vanishing point), homogeneous, unit norm; ``v_x[2] -> 0`` when it
+            is at infinity.
+        W: ``I - 2 v_x l_s^T / (v_x^T l_s)``, pixels.
+        rms: RMS symmetry residual ``sqrt(Cost / N)`` in pixels.
+        cost: eq. 20's cost in px^2.
+        converged: the optimiser reported success.
+        steps: Levenberg-Marquardt steps taken.
+    """
+
+    l_s: Float[Array, "3"]
+    v_x: Float[Array, "3"]
+    W: Float[Array, "3 3"]
+    rms: Float[Array, ""]
+    cost: Float[Array, ""]
+    converged: Bool[Array, ""]
+    steps: Int[Array, ""]
+
+
+# ---------------------------------------------------------------------------- maths
+
+
+def homology_matrix(v: Float[Array, "3"], l: Float[Array, "3"]) -> Float[Array, "3 3"]:
+    """Harmonic homology ``W = I - 2 v l^T / (v^T l)`` (any consistent coordinates)."""
+    return jnp.eye(3) - 2.0 * jnp.outer(v, l) / (v @ l)
+
+
+def transfer(W: Float[Array, "3 3"], x: Float[Array, "N 2"]) -> Float[Array, "N 2"]:
+    """Map inhomogeneous points by the homography ``W`` (guarded against points sent
+    to infinity, which are sent very far instead)."""
+    y = x @ W[:, :2].T + W[:, 2]
+    w = y[:, 2]
+    w = jnp.where(jnp.abs(w) < 1e-12, jnp.where(w < 0, -1e-12, 1e-12), w)
+    return y[:, :2] / w[:, None]
+
+
+def symmetry_residuals(
+    v: Float[Array, "3"], l: Float[Array, "3"], samples: Float[Array, "N 2"], field: DistanceField
+) -> Float[Array, "N"]:
+    """The residuals of eq. 20: ``d(W(v, l) x_i)`` for each sample ``x_i``, in the units
+    of the field (pixels if the field and samples are in pixels)."""
+    return signed_distances(field, transfer(homology_matrix(v, l), samples))
+
+
+def _tangent_basis(v0: np.ndarray) -> np.ndarray:
+    """Orthonormal (3, 2) basis of the plane orthogonal to the unit vector ``v0``."""
+    a = np.eye(3)[int(np.argmin(np.abs(v0)))]
+    e1 = np.cross(v0, a)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(v0, e1)
+    return np.stack([e1, e2], axis=1)
+
+
+def _unpack(p, v0, E):
+    l = jnp.stack([jnp.cos(p[0]), jnp.sin(p[0]), -p[1]])
+    v = v0 + E @ p[2:]
+    return v / jnp.linalg.norm(v), l
+
+
+def _pack(v: np.ndarray, l: np.ndarray):
+    """Start parameters ``(p0, v0, E)`` from a homology (v, l) in normalised coords."""
+    v = np.asarray(v, float) / np.linalg.norm(v)
+    l = np.asarray(l, float) / np.linalg.norm(l[:2])
+    return np.array([np.arctan2(l[1], l[0]), -l[2], 0.0, 0.0]), v, _tangent_basis(v)
+
+
+# ---------------------------------------------------------------- initialisation
+
+
+def _convex_hull_indices(p: np.ndarray) -> np.ndarray:
+    """Indices of the convex hull vertices of ``p`` (n, 2), sorted by index."""
+    order = np.lexsort((p[:, 1], p[:, 0]))
+
+    def half(idx):
+        h: list[int] = []
+        for i in idx:
+            while len(h) >= 2:
+                o, a = p[h[-2]], p[h[-1]]
+                if (a[0] - o[0]) * (p[i][1] - o[1]) - (a[1] - o[1]) * (p[i][0] - o[0]) <= 0:
+                    h.pop()
+                else:
+                    break
+            h.append(int(i))
+        return h
+
+    hull = half(order)[:-1] + half(order[::-1])[:-1]
+    return np.unique(np.asarray(hull, dtype=int))
+
+
+def _pockets(p: np.ndarray, min_depth: float):
+    """Concavities of a positively oriented closed curve: ``(depth, i, j)`` for every
+    hull edge from vertex ``i`` to ``j`` (in curve order) whose skipped stretch of
+    outline lies deeper than ``min_depth`` inside the hull, deepest first."""
+    n = len(p)
+    h = _convex_hull_indices(p)
+    out = []
+    for a, b in zip(h, np.roll(h, -1)):
+        gap = (b - a) % n
+        if gap < 3:
+            continue
+        idx = (a + np.arange(1, gap)) % n
+        d = p[b] - p[a]
+        nrm = np.hypot(*d)
+        if nrm == 0:
+            continue
+        depth = np.max(np.abs((p[idx, 0] - p[a, 0]) * d[1] - (p[idx, 1] - p[a, 1]) * d[0]) / nrm)
+        if depth > min_depth:
+            out.append((float(depth), int(a), int(b)))
+    out.sort(reverse=True)
+    return out
+
+
+def _hom(x):
+    return np.array([x[0], x[1], 1.0])
+
+
+def bitangent_candidates(p: np.ndarray, max_pockets: int = 4) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Homologies ``(v, l)`` from pairs of convex-hull bitangents (paper, Sec. 5.1).
+
+    ``p`` is the positively oriented outline in normalised coordinates.  For pockets
+    spanning ``a1 -> a2`` and ``b1 -> b2`` along the curve, the reflection pairs
+    ``a1 <-> b2`` and ``a2 <-> b1``.
+    """
+    scale = np.sqrt(np.mean(np.sum((p - p.mean(0)) ** 2, axis=1)))
+    pockets = _pockets(p, min_depth=0.01 * scale)[:max_pockets]
+    cands = []
+    for i in range(len(pockets)):
+        for j in range(i + 1, len(pockets)):
+            a1, a2 = _hom(p[pockets[i][1]]), _hom(p[pockets[i][2]])
+            b1, b2 = _hom(p[pockets[j][1]]), _hom(p[pockets[j][2]])
+            # order the two pockets along the curve so that a1 < a2 <= b1 < b2
+            v = np.cross(np.cross(a1, b2), np.cross(a2, b1))
+            l = np.cross(np.cross(np.cross(a1, a2), np.cross(b1, b2)),
+                         np.cross(np.cross(a1, b1), np.cross(b2, a2)))
+            if np.linalg.norm(v) < 1e-12 or np.linalg.norm(l[:2]) < 1e-12:
+                continue
+            if abs(v @ l) < 1e-9 * np.linalg.norm(v) * np.linalg.norm(l):
+                continue  # vertex on the axis: not a homology
+            cands.append((v, l))
+    return cands
+
+
+@jax.jit
+def _mirror_costs(knots, samples, thetas, offsets):
+    """Truncated eq. 20 cost of the mirror symmetries with axis directions ``thetas``
+    and offsets ``offsets`` (a grid), ``v`` at infinity orthogonal to the axis.  The
+    distance is to the nearest of the coarse ``knots`` (enough to rank a grid)."""
+
+    def cost(theta, rho):
+        l = jnp.stack([jnp.cos(theta), jnp.sin(theta), -rho])
+        v = jnp.stack([jnp.cos(theta), jnp.sin(theta), 0.0])
+        y = transfer(homology_matrix(v, l), samples)
+        d2 = jnp.min(jnp.sum((y[:, None, :] - knots[None, :, :]) ** 2, -1), -1)
+        return jnp.mean(jnp.minimum(d2, 0.25))  # truncated: robust to gross mismatch
+
+    return jax.vmap(lambda t: jax.vmap(lambda r: cost(t, r))(offsets))(thetas)
+
+
+def mirror_candidates(points_n: np.ndarray, samples, keep: int = 3):
+    """Best local minima of the mirror-symmetry grid search (normalised coords)."""
+    thetas = np.linspace(0.0, np.pi, _GRID_DIRECTIONS, endpoint=False)
+    offsets = np.asarray(_GRID_OFFSETS)
+    knots = points_n[np.linspace(0, len(points_n), 128, endpoint=False).astype(int)]
+    c = np.asarray(_mirror_costs(jnp.asarray(knots), samples, jnp.asarray(thetas), jnp.asarray(offsets)))
+    best = c.min(axis=1)
+    is_min = (best <= np.roll(best, 1)) & (best <= np.roll(best, -1))
+    order = [i for i in np.argsort(best) if is_min[i]][:keep]
+    out = []
+    for i in order:
+        t, r = thetas[i], offsets[int(np.argmin(c[i]))]
+        out.append((np.array([np.cos(t), np.sin(t), 0.0]), np.array([np.cos(t), np.sin(t), -r])))
+    return out
+
+
+# ------------------------------------------------------------------------ refine
+
+
+def _residuals(p, args):
+    field, samples, v0, E = args
+    v, l = _unpack(p, v0, E)
+    return symmetry_residuals(v, l, samples, field)
+
+
+_SOLVER = optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10)
+
+
+def refine(field: DistanceField, samples, p0, v0, E, max_steps: int = 100):
+    """Levenberg-Marquardt on eq. 20 from one start ``(p0, v0, E)`` (normalised
+    coordinates).  Returns ``(v, l, cost, converged, steps)``; pure, jit/vmap-able."""
+    sol = optx.least_squares(
+        _residuals, _SOLVER, p0, args=(field, samples, v0, E), max_steps=max_steps, throw=False
+    )
+    v, l = _unpack(sol.value, v0, E)
+    r = _residuals(sol.value, (field, samples, v0, E))
+    return v, l, jnp.sum(r**2), sol.result == optx.RESULTS.successful, sol.stats["num_steps"]
+
+
+@functools.partial(jax.jit, static_argnames=("n_samples",))
+def _view_setup(points_n, n_samples: int):
+    field = make_field(points_n)
+    return field, curve_points(field, n_samples)
+
+
+_refine_jit = jax.jit(refine, static_argnames=("max_steps",))
+
+
+def _refine_candidates(field, samples, cands, max_steps: int = 100):
+    """Refine each start ``(v, l)`` (normalised coordinates) and keep the lowest cost.
+
+    A Python loop over one compiled solve: on CPU this beats ``vmap``, which would step
+    every candidate until the slowest one converges."""
+    best = None
+    for v0, l0 in cands:
+        p0, v0, E = (jnp.asarray(a) for a in _pack(v0, l0))
+        out = _refine_jit(field, samples, p0, v0, E, max_steps=max_steps)
+        cost = float(out[2])
+        if np.isfinite(cost) and (best is None or cost < best[2]):
+            best = (out[0], out[1], cost, out[3], out[4])
+    if best is None:
+        raise FloatingPointError("every start of the homology fit gave a non-finite cost")
+    return best
+
+
+def _to_pixels(T: np.ndarray, v, l, cost, ok, steps, scale, n_samples) -> Homology:
+    v_pix = np.linalg.solve(T, np.asarray(v))
+    v_pix = v_pix / np.linalg.norm(v_pix)
+    l_pix = T.T @ np.asarray(l)
+    l_pix = l_pix / np.linalg.norm(l_pix[:2])
+    v_j, l_j = jnp.asarray(v_pix), jnp.asarray(l_pix)
+    cost_px = jnp.asarray(cost) * scale**2
+    return Homology(
+        l_s=l_j,
+        v_x=v_j,
+        W=homology_matrix(v_j, l_j),
+        rms=jnp.sqrt(cost_px / n_samples),
+        cost=cost_px,
+        converged=jnp.asarray(ok),
+        steps=jnp.asarray(steps),
+    )
+
+
+def fit_homology(
+    outline,
+    *,
+    n_samples: int = DEFAULT_SAMPLES,
+    n_points: int = DEFAULT_POINTS,
+    init=None,
+    max_steps: int = 100,
+) -> Homology:
+    """Fit the harmonic homology of one outline by minimising eq. 20.
+
+    Args:
+        outline: (N, 2) pixel coordinates of a closed outline, or an :class:`Outline`.
+        n_samples: number of samples ``x_i`` evenly spaced along the outline (the paper
+            uses 100).
+        n_points: the outline is resampled to this many points for its distance field.
+        init: optional starting homology ``(v_x, l_s)`` in pixels (homogeneous); by
+            default the start is found automatically (bitangents of the convex hull
+            and a symmetry-axis search, the lowest final cost wins).
+        max_steps: Levenberg-Marquardt step limit.
+
+    Returns:
+        :class:`Homology` in pixels, with the RMS symmetry residual in px.
+    """
+    o = make_outline(outline, n_points)
+    pts = np.asarray(o.points)
+    T = normalising_transform(pts)
+    scale = 1.0 / T[0, 0]
+    pn = np.asarray(transform_points(T, pts))
+    field, samples = _view_setup(jnp.asarray(pn), n_samples)
+    if init is not None:
+        v0, l0 = (np.asarray(a, dtype=np.float64) for a in init)
+        cands = [(T @ v0, np.linalg.solve(T.T, l0))]
+    else:
+        cands = bitangent_candidates(pn) + mirror_candidates(pn, samples)
+    v, l, cost, ok, steps = _refine_candidates(field, samples, cands, max_steps=max_steps)
+    return _to_pixels(T, v, l, cost, ok, steps, scale, n_samples)

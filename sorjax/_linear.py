@@ -1,0 +1,110 @@
+"""The paper's linear methods: Method I (Sec. 5.2.1) and Method II (Sec. 5.2.2).
+
+All functions are pure ``jax.numpy`` on stacked per-view homologies ``v`` (V, 3) and
+``l`` (V, 3), in *normalised* coordinates (an isotropic similarity of the pixels, see
+:mod:`sorjax._camera`), so they ``jit`` and ``vmap`` over trials.  Each returns the
+intrinsics ``(fu, fv, u0, v0)`` in those coordinates and a validity flag.
+
+Method II (eqs. 27-28).  The pole-polar constraint ``omega v ~ l`` says that
+``m = omega v`` is parallel to ``l``.  With zero skew ``m = B(v) w`` is linear in
+``w = (w1, ..., w5)``::
+
+    B(v) = [[v1, v3, 0,  0,  0 ],
+            [0,  0,  v2, v3, 0 ],
+            [0,  v1, 0,  v2, v3]],
+
+and ``m || l`` is ``p^T B(v) w = q^T B(v) w = 0`` for an orthonormal basis ``p, q`` of
+the plane orthogonal to ``l``.  These are exactly the paper's eqs. 27-28 (which are two
+rows of ``(omega v) x l = 0``) recombined so that they never lose rank (eqs. 27-28
+become dependent when ``l_3 = 0``, i.e. when the axis passes through the origin of the
+coordinates).  ``v`` and ``l`` are scaled to unit norm first.  IIa solves for ``w`` as
+the right singular vector of the smallest singular value; IIb imposes unit aspect
+ratio, ``w1 = w3``.  Optional per-view weights multiply each view's two rows.
+
+Method I (eqs. 21-23, zero skew and unit aspect).  ``l_x = (l2 v3, -l1 v3,
+l1 v2 - l2 v1)`` is the line through ``v`` orthogonal to ``l``; the principal point is
+the least-squares intersection of the ``l_x`` (each scaled to ``a^2 + b^2 = 1``), and
+``f = mean_i sqrt(dist(x0_i, v_i) dist(x0_i, l_i))`` with ``x0_i`` the principal
+point projected onto ``l_x,i``.  A known aspect ratio ``a = fu/fv`` is handled by
+eqs. 24-26: map ``v -> diag(1/a, 1, 1) v`` and ``l -> diag(a, 1, 1) l``, solve, then
+``u0 = a u0'``, ``fu = a f``, ``fv = f`` (do that mapping in pixels, before
+normalising).  Views whose ``v`` is at infinity (``|v3| ~ 0``) give no ``l_x`` and
+are left out; Method I needs two views with finite, distinct ``l_x``.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ._camera import intrinsics_from_omega_vector
+
+
+def _unit(x):
+    return x / jnp.linalg.norm(x, axis=-1, keepdims=True)
+
+
+def pole_polar_rows(v: Float[Array, "V 3"], l: Float[Array, "V 3"]) -> Float[Array, "2V 5"]:
+    """The 2 linear constraints per view on ``w`` (see module docstring)."""
+    v, l = _unit(v), _unit(l)
+    v1, v2, v3 = v[:, 0], v[:, 1], v[:, 2]
+    z = jnp.zeros_like(v1)
+    B = jnp.stack(
+        [jnp.stack([v1, v3, z, z, z], -1), jnp.stack([z, z, v2, v3, z], -1), jnp.stack([z, v1, z, v2, v3], -1)],
+        -2,
+    )  # (V, 3, 5)
+    # orthonormal basis of l's orthogonal complement, built without branches
+    a = jnp.where(jnp.abs(l[:, :1]) < 0.6, jnp.array([1.0, 0.0, 0.0]), jnp.array([0.0, 1.0, 0.0]))
+    p = _unit(jnp.cross(l, a))
+    q = jnp.cross(l, p)
+    rows = jnp.stack([jnp.einsum("vi,vij->vj", p, B), jnp.einsum("vi,vij->vj", q, B)], 1)
+    return rows.reshape(-1, 5)
+
+
+def method_ii(v, l, *, unit_aspect: bool, weights=None):
+    """Method IIa (``unit_aspect=False``) or IIb (``True``).
+
+    Returns ``(fu, fv, u0, v0, ok, w)`` in the coordinates of ``v, l``; ``ok`` is False
+    when the estimated omega is not positive definite (then fu, fv are NaN)."""
+    A = pole_polar_rows(v, l)
+    if weights is not None:
+        A = A * jnp.repeat(jnp.asarray(weights), 2)[:, None]
+    if unit_aspect:
+        A4 = jnp.stack([A[:, 0] + A[:, 2], A[:, 1], A[:, 3], A[:, 4]], -1)
+        w4 = jnp.linalg.svd(A4, full_matrices=False)[2][-1]
+        w = jnp.stack([w4[0], w4[1], w4[0], w4[2], w4[3]])
+    else:
+        w = jnp.linalg.svd(A, full_matrices=False)[2][-1]
+    fu, fv, u0, v0, ok = intrinsics_from_omega_vector(w)
+    return fu, fv, u0, v0, ok, w
+
+
+def method_i(v, l, *, finite_tol: float = 1e-9):
+    """Method I (unit aspect ratio, zero skew).
+
+    Returns ``(f, f, u0, v0, ok)`` in the coordinates of ``v, l``.  ``ok`` is False when
+    fewer than two views have a finite vertex or their lines ``l_x`` are parallel."""
+    v, l = _unit(v), _unit(l)
+    l1, l2 = l[:, 0], l[:, 1]
+    v1, v2, v3 = v[:, 0], v[:, 1], v[:, 2]
+    lx = jnp.stack([l2 * v3, -l1 * v3, l1 * v2 - l2 * v1], -1)
+    finite = jnp.abs(v3) > finite_tol
+    nrm = jnp.linalg.norm(lx[:, :2], axis=-1)
+    wgt = jnp.where(finite & (nrm > 0), 1.0, 0.0)
+    lx = lx / jnp.where(nrm > 0, nrm, 1.0)[:, None]
+    A = lx[:, :2] * wgt[:, None]
+    b = -lx[:, 2] * wgt
+    N = A.T @ A
+    det = jnp.linalg.det(N)
+    ok = (jnp.sum(wgt) >= 2) & (det > 1e-12 * jnp.trace(N) ** 2)
+    x0 = jnp.linalg.solve(jnp.where(ok, N, jnp.eye(2)), A.T @ b)
+    # project x0 onto each l_x, distances to v (inhomogeneous) and to l
+    s = lx[:, :2] @ x0 + lx[:, 2]
+    x0i = x0[None, :] - s[:, None] * lx[:, :2]
+    vin = v[:, :2] / jnp.where(finite, v3, 1.0)[:, None]
+    dv = jnp.linalg.norm(x0i - vin, axis=-1)
+    dl = jnp.abs(jnp.sum(x0i * l[:, :2], -1) + l[:, 2]) / jnp.linalg.norm(l[:, :2], axis=-1)
+    fi = jnp.sqrt(dv * dl)
+    f = jnp.sum(jnp.where(wgt > 0, fi, 0.0)) / jnp.maximum(jnp.sum(wgt), 1.0)
+    f = jnp.where(ok, f, jnp.nan)
+    return f, f, x0[0], x0[1], ok

@@ -1,0 +1,193 @@
+"""Outlines: validation at the boundary, orientation, resampling by arc length.
+
+An :class:`Outline` is a closed curve in pixels (OpenCV convention: the centre of the
+top-left pixel is ``(0, 0)``), stored as ``M`` points evenly spaced in arc length,
+ordered so that the shoelace area ``1/2 sum (x_i y_{i+1} - x_{i+1} y_i)`` is positive.
+Every outline of a calibration is resampled to the same ``M`` so that batches of
+views have static shapes (they ``vmap``).
+
+All checks run here, in plain numpy, before anything is traced: a user's mistake
+raises :class:`ValueError` saying what is wrong and what to do.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+DEFAULT_POINTS = 512
+MIN_POINTS = 10
+
+
+class Outline(eqx.Module):
+    """A validated closed outline: ``points`` (M, 2), pixels, evenly spaced in arc
+    length, positive shoelace orientation (no repeated end point)."""
+
+    points: Float[Array, "M 2"]
+
+    @property
+    def n_points(self) -> int:
+        return self.points.shape[-2]
+
+    def perimeter(self) -> Float[Array, ""]:
+        d = jnp.roll(self.points, -1, axis=-2) - self.points
+        return jnp.sum(jnp.linalg.norm(d, axis=-1), axis=-1)
+
+    def area(self) -> Float[Array, ""]:
+        return signed_area(self.points)
+
+
+def signed_area(p) -> Float[Array, ""]:
+    """Shoelace area of a closed polygon (..., M, 2); positive for our orientation."""
+    q = jnp.roll(p, -1, axis=-2)
+    return 0.5 * jnp.sum(p[..., 0] * q[..., 1] - q[..., 0] * p[..., 1], axis=-1)
+
+
+def _segments_cross(p: np.ndarray) -> bool:
+    """True when two non-adjacent edges of the closed polygon ``p`` (n, 2) cross."""
+    n = len(p)
+    if n > 400:  # decimate: crossings at a finer scale than this are noise-level
+        p = p[np.linspace(0, n, 400, endpoint=False).astype(int)]
+        n = len(p)
+    a, b = p, np.roll(p, -1, axis=0)
+    d = b - a
+
+    def orient(o, dd, x):  # sign of cross(dd, x - o), broadcast (n, 1) vs (1, n)
+        return dd[:, None, 0] * (x[None, :, 1] - o[:, None, 1]) - dd[:, None, 1] * (
+            x[None, :, 0] - o[:, None, 0]
+        )
+
+    o1 = orient(a, d, a)
+    o2 = orient(a, d, b)
+    # segment i = (a_i, b_i), segment j = (a_j, b_j): they cross when a_j, b_j lie on
+    # opposite sides of line i and a_i, b_i on opposite sides of line j.
+    s1 = o1 * o2 < 0  # [i, j]: a_j and b_j straddle line i
+    s2 = s1.T  # [i, j]: a_i and b_i straddle line j
+    idx = np.arange(n)
+    gap = np.abs(idx[:, None] - idx[None, :])
+    adjacent = (gap <= 1) | (gap >= n - 1)
+    return bool(np.any(s1 & s2 & ~adjacent))
+
+
+def validate_points(points, *, name: str = "outline") -> np.ndarray:
+    """Check a user's outline and return it as a clean (N, 2) float64 numpy array.
+
+    Raises ValueError for: wrong shape or dtype, NaN/inf, fewer than 10 distinct
+    points, an open curve, zero area, a self-intersecting curve.
+    """
+    if isinstance(points, Outline):
+        return np.asarray(points.points, dtype=np.float64)
+    try:
+        arr = np.asarray(points)
+    except Exception as e:  # ragged lists and the like
+        raise ValueError(
+            f"{name}: could not be read as an (N, 2) array of pixel coordinates ({e}). "
+            "Pass a numpy array of shape (N, 2) with one (x, y) point per row."
+        ) from None
+    if arr.dtype == object or not (
+        np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)
+    ):
+        raise ValueError(
+            f"{name}: expected real numbers, got dtype {arr.dtype}. "
+            "Pass an (N, 2) float array of pixel coordinates."
+        )
+    if arr.ndim == 3 and arr.shape[1] == 1 and arr.shape[2] == 2:  # OpenCV contour
+        arr = arr[:, 0, :]
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        hint = " (it looks transposed: pass points.T)" if arr.ndim == 2 and arr.shape[0] == 2 else ""
+        raise ValueError(
+            f"{name}: expected shape (N, 2), got {arr.shape}{hint}. "
+            "An outline is one (x, y) pixel coordinate per row."
+        )
+    arr = arr.astype(np.float64)
+    if arr.shape[0] == 0:
+        raise ValueError(f"{name}: is empty. Pass the closed outline of the object's silhouette.")
+    bad = ~np.isfinite(arr).all(axis=1)
+    if bad.any():
+        raise ValueError(
+            f"{name}: {int(bad.sum())} of {len(arr)} points are NaN or infinite "
+            f"(first at row {int(np.argmax(bad))}). Remove them before calibrating."
+        )
+    # drop consecutive duplicates and a closing repeat of the first point
+    keep = np.ones(len(arr), bool)
+    keep[1:] = np.any(np.diff(arr, axis=0) != 0, axis=1)
+    arr = arr[keep]
+    if len(arr) > 1 and np.all(arr[-1] == arr[0]):
+        arr = arr[:-1]
+    if len(arr) < MIN_POINTS:
+        raise ValueError(
+            f"{name}: has {len(arr)} distinct points; at least {MIN_POINTS} are needed. "
+            "Pass a densely sampled outline (e.g. every pixel of the contour)."
+        )
+    seg = np.linalg.norm(np.diff(arr, axis=0), axis=1)
+    gap = float(np.linalg.norm(arr[-1] - arr[0]))
+    med = float(np.median(seg))
+    if gap > 10 * med and gap > 3.0:
+        raise ValueError(
+            f"{name}: looks like an open curve: its last point is {gap:.1f} px from its "
+            f"first, while neighbouring points are {med:.2f} px apart. An outline must be "
+            "the closed boundary of the silhouette; close it, or trace the whole silhouette."
+        )
+    perim = float(seg.sum() + gap)
+    area = float(signed_area(jnp.asarray(arr)))
+    if abs(area) < 1e-4 * perim**2:
+        raise ValueError(
+            f"{name}: encloses (almost) no area ({abs(area):.3g} px^2 for a perimeter of "
+            f"{perim:.1f} px): the points are collinear or the curve doubles back on itself. "
+            "Pass the closed boundary of a silhouette."
+        )
+    if _segments_cross(arr):
+        raise ValueError(
+            f"{name}: crosses itself. An outline must be a simple closed curve (the "
+            "boundary of one silhouette); check the point order, or split touching objects."
+        )
+    return arr
+
+
+def resample_closed(points: np.ndarray, n: int) -> np.ndarray:
+    """Resample a closed polyline (N, 2) to ``n`` points evenly spaced in arc length,
+    starting at its first point (linear interpolation along the polyline)."""
+    p = np.asarray(points, dtype=np.float64)
+    q = np.vstack([p, p[:1]])
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q, axis=0), axis=1))])
+    t = np.linspace(0.0, s[-1], n, endpoint=False)
+    return np.stack([np.interp(t, s, q[:, 0]), np.interp(t, s, q[:, 1])], axis=1)
+
+
+def make_outline(points, n_points: int = DEFAULT_POINTS, *, name: str = "outline") -> Outline:
+    """Validate ``points`` (N, 2 pixels; an :class:`Outline` passes through), orient
+    them positively and resample to ``n_points`` evenly spaced points."""
+    if isinstance(points, Outline) and points.n_points == n_points:
+        return points
+    arr = validate_points(points, name=name)
+    if float(signed_area(jnp.asarray(arr))) < 0:
+        arr = arr[::-1]
+    if len(arr) < n_points // 4:
+        warnings.warn(
+            f"{name}: only {len(arr)} points, resampled to {n_points} by straight segments; "
+            "corners of the polygon will bias the fit. Pass a denser outline.",
+            stacklevel=3,
+        )
+    return Outline(jnp.asarray(resample_closed(arr, n_points)))
+
+
+def as_outlines(outlines, n_points: int = DEFAULT_POINTS) -> list[Outline]:
+    """Validate a sequence of outlines (arrays or :class:`Outline`)."""
+    if isinstance(outlines, Outline) or (
+        isinstance(outlines, np.ndarray) and outlines.ndim == 2
+    ):
+        raise ValueError(
+            "expected a list of outlines (one per view), got a single outline. "
+            "Wrap it in a list; note that calibration needs at least two views."
+        )
+    try:
+        seq = list(outlines)
+    except TypeError:
+        raise ValueError(
+            f"expected a list of outlines (one (N, 2) array per view), got {type(outlines).__name__}."
+        ) from None
+    return [make_outline(o, n_points, name=f"outline {i}") for i, o in enumerate(seq)]
