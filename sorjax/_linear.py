@@ -71,10 +71,10 @@ def method_ii(v, l, *, unit_aspect: bool, weights=None):
         A = A * jnp.repeat(jnp.asarray(weights), 2)[:, None]
     if unit_aspect:
         A4 = jnp.stack([A[:, 0] + A[:, 2], A[:, 1], A[:, 3], A[:, 4]], -1)
-        w4 = jnp.linalg.svd(A4, full_matrices=False)[2][-1]
+        w4 = jnp.linalg.svd(A4, full_matrices=True)[2][-1]
         w = jnp.stack([w4[0], w4[1], w4[0], w4[2], w4[3]])
     else:
-        w = jnp.linalg.svd(A, full_matrices=False)[2][-1]
+        w = jnp.linalg.svd(A, full_matrices=True)[2][-1]
     fu, fv, u0, v0, ok = intrinsics_from_omega_vector(w)
     return fu, fv, u0, v0, ok, w
 

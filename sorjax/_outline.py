@@ -132,6 +132,11 @@ def validate_points(points, *, name: str = "outline") -> np.ndarray:
             f"first, while neighbouring points are {med:.2f} px apart. An outline must be "
             "the closed boundary of the silhouette; close it, or trace the whole silhouette."
         )
+    if _segments_cross(arr):
+        raise ValueError(
+            f"{name}: crosses itself. An outline must be a simple closed curve (the "
+            "boundary of one silhouette); check the point order, or split touching objects."
+        )
     perim = float(seg.sum() + gap)
     area = float(signed_area(jnp.asarray(arr)))
     if abs(area) < 1e-4 * perim**2:
@@ -139,11 +144,6 @@ def validate_points(points, *, name: str = "outline") -> np.ndarray:
             f"{name}: encloses (almost) no area ({abs(area):.3g} px^2 for a perimeter of "
             f"{perim:.1f} px): the points are collinear or the curve doubles back on itself. "
             "Pass the closed boundary of a silhouette."
-        )
-    if _segments_cross(arr):
-        raise ValueError(
-            f"{name}: crosses itself. An outline must be a simple closed curve (the "
-            "boundary of one silhouette); check the point order, or split touching objects."
         )
     return arr
 
