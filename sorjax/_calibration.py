@@ -10,16 +10,18 @@ import math
 import warnings
 
 import equinox as eqx
+import optimistix as optx
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, Float, Int
 
 from ._camera import intrinsics_matrix, normalising_transform, omega_vector_from_intrinsics, omega_matrix
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
+from ._bundle import covariance, fit_bundle, unpack_intrinsics
 from ._linear import method_i, method_ii
 from ._outline import DEFAULT_POINTS, as_outlines
 
-METHODS = ("I", "IIa", "IIb")
+METHODS = ("bundle", "I", "IIa", "IIb")
 
 
 class RESULTS(eqx.Enumeration):
@@ -31,6 +33,10 @@ class RESULTS(eqx.Enumeration):
         "definite: no real camera agrees with them. The views are too noisy or too "
         "few, or an outline is not a surface of revolution. Add views with stronger "
         "perspective (objects off-centre, seen from above or below)."
+    )
+    not_converged = (
+        "The bundle adjustment did not converge. The outlines may not be surfaces of "
+        "revolution, or the views may not determine the camera; inspect view_rms."
     )
     degenerate = (
         "The views do not determine the intrinsics with this method (e.g. fewer than two "
@@ -49,16 +55,31 @@ class Calibration(eqx.Module):
     Attributes:
         K: (3, 3) intrinsics in pixels (NaN entries when not successful).
         omega: (3, 3) image of the absolute conic ``K^-T K^-1`` (pixels), as estimated.
-        method: "I", "IIa" or "IIb".
         homologies: the per-view :class:`Homology` fits (pixels).
         result: a :class:`RESULTS` code; ``success`` is ``result == successful``.
+        covariance: (4, 4) covariance of ``(fu, fv, u0, v0)`` in px^2 (bundle only;
+            NaN for the linear methods, which give no uncertainty).
+        cost: eq. 20's cost summed over the views at the estimate, px^2 (bundle only).
+        view_rms: (V,) RMS symmetry residual of each view, px: under the joint model
+            for the bundle, of the free per-view fit for the linear methods.
+        steps: optimiser steps (bundle; 0 for the linear methods).
+        method: "I", "IIa", "IIb" or "bundle".
     """
 
     K: Float[Array, "3 3"]
     omega: Float[Array, "3 3"]
     homologies: tuple[Homology, ...]
     result: RESULTS
+    covariance: Float[Array, "4 4"]
+    cost: Float[Array, ""]
+    view_rms: Float[Array, " V"]
+    steps: Int[Array, ""]
     method: str = eqx.field(static=True)
+
+    @property
+    def std(self) -> np.ndarray:
+        """Standard deviations of ``(fu, fv, u0, v0)`` in px (NaN when unknown)."""
+        return np.sqrt(np.diag(np.asarray(self.covariance)))
 
     @property
     def fu(self) -> float:
@@ -127,9 +148,39 @@ def linear_calibration(homologies, method: str, T: np.ndarray, aspect_ratio=None
     return K, omega, code
 
 
+def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples) -> Calibration:
+    """Seed the 2V+4 (or 2V+3) bundle with the linear methods and solve it."""
+    scale = 1.0 / T[0, 0]
+    seeds = []
+    methods = ("IIa", "IIb") if aspect_ratio is None else ("IIb",)
+    for m in methods:
+        K, _, code = linear_calibration(homologies, m, T, aspect_ratio)
+        if bool(code == RESULTS.successful):
+            Kn = T @ np.asarray(K)
+            seeds.append((Kn[0, 0], Kn[1, 1], Kn[0, 2], Kn[1, 2]))
+    if not seeds:  # no positive-definite linear seed: a spread of plausible cameras
+        a = 1.0 if aspect_ratio is None else float(aspect_ratio)
+        seeds = [(a * f, f, 0.0, 0.0) for f in (2.0, 5.0, 12.0)]
+    pts_n = np.stack([np.asarray(o.points) @ T[:2, :2].T + T[:2, 2] for o in outs])
+    v_n = np.stack([T @ np.asarray(h.v_x) for h in homologies])
+    y, res, steps, r, problem = fit_bundle(pts_n, v_n, seeds, aspect_ratio, n_samples)
+    cov, _ = covariance(y, problem, jnp.asarray(T))
+    fu, fv, u0, v0 = unpack_intrinsics(y[0], problem.aspect)
+    Kn = intrinsics_matrix(fu, fv, u0, v0)
+    K = jnp.asarray(np.linalg.inv(T)) @ Kn
+    omega = jnp.linalg.inv(K).T @ jnp.linalg.inv(K)
+    ok = (res == optx.RESULTS.successful) & jnp.all(jnp.isfinite(K))
+    code = RESULTS.where(ok, RESULTS.successful, RESULTS.not_converged)
+    rv = r.reshape(len(outs), -1) * scale
+    view_rms = jnp.sqrt(jnp.mean(rv**2, axis=1))
+    cost = jnp.sum(rv**2)
+    K = jnp.where(ok, K, jnp.nan)
+    return Calibration(K, omega, homologies, code, cov, cost, view_rms, steps, "bundle")
+
+
 def calibrate(
     outlines,
-    method: str = "IIb",
+    method: str = "bundle",
     aspect_ratio: float | None = None,
     *,
     n_samples: int = DEFAULT_SAMPLES,
@@ -142,10 +193,12 @@ def calibrate(
     Args:
         outlines: one closed outline per view, each an (N, 2) array of pixel
             coordinates (OpenCV convention) or an :class:`Outline`; at least two.
-        method: "I" (zero skew, unit or known aspect ratio; eqs. 21-26), "IIa" (zero
-            skew, free aspect ratio; eqs. 27-28) or "IIb" (IIa with ``fu = a fv``,
-            ``a`` = 1 unless ``aspect_ratio`` says otherwise).
-        aspect_ratio: known ``fu / fv`` for "I" and "IIb" (default 1).
+        method: "bundle" (default: the joint 2V+4 estimator, or 2V+3 with a known
+            aspect ratio, seeded by Method II; gives the covariance), "I" (zero skew,
+            unit or known aspect ratio; eqs. 21-26), "IIa" (zero skew, free aspect
+            ratio; eqs. 27-28) or "IIb" (IIa with ``fu = a fv``).
+        aspect_ratio: known ``fu / fv``.  "I" and "IIb" assume 1 when it is None;
+            "bundle" then estimates it (free aspect).
         n_samples: samples per outline in the homology fit (eq. 20).
         n_points: resampled outline size for the distance fields.
         homologies: optional precomputed per-view :class:`Homology` fits.
@@ -170,8 +223,13 @@ def calibrate(
         if not bool(h.converged):
             warnings.warn(f"view {i}: the homology fit did not converge (rms {float(h.rms):.3g} px).", stacklevel=2)
     T = normalising_transform(np.concatenate([np.asarray(o.points) for o in outs]))
-    K, omega, code = linear_calibration(homologies, method, T, aspect_ratio)
-    cal = Calibration(K=K, omega=omega, homologies=tuple(homologies), result=code, method=method)
+    if method == "bundle":
+        cal = _bundle_calibration(outs, tuple(homologies), T, aspect_ratio, n_samples)
+    else:
+        K, omega, code = linear_calibration(homologies, method, T, aspect_ratio)
+        nan = jnp.full((4, 4), jnp.nan)
+        rms = jnp.stack([h.rms for h in homologies])
+        cal = Calibration(K, omega, tuple(homologies), code, nan, jnp.asarray(jnp.nan), rms, jnp.asarray(0), method)
     if throw and not cal.success:
         raise CalibrationError(cal.message)
     return cal

@@ -1,0 +1,169 @@
+"""The joint, "statistically optimal" estimator the paper left as future work (Sec. 9).
+
+Parameters (2V + 4 for V views, all in the calibration's normalised coordinates):
+
+* the intrinsics ``k = (log fu, log fv, u0, v0)`` (free aspect ratio), or
+  ``(log fv, u0, v0)`` with ``fu = a fv`` for a known aspect ratio ``a`` (2V + 3);
+  the logarithms keep ``omega = K^-T K^-1`` positive definite on every step;
+* one vertex ``v_x`` per view in a tangent chart of the unit sphere around its seed,
+  ``v = normalise(v0 + E d)`` (2 each), well conditioned when ``v_x`` is at infinity.
+
+Each view's axis follows from the pole-polar relation, ``l_s = omega v_x``, so that::
+
+    W = I - 2 v v^T omega / (v^T omega v)        (v^T omega v > 0 always)
+
+and the residuals are eq. 20's for every view at once: ``d_j(W_j x_ij)`` for the
+``N`` samples ``x_ij`` of view ``j``, read from the smooth signed distance field
+``d_j`` of its outline; all views stacked (V N residuals).  Levenberg-Marquardt
+(optimistix) with Jacobians by autodiff; the seed is a linear method (IIa for free
+aspect, IIb for a known aspect ratio) with a safe fallback when its omega is not
+positive definite.
+
+Uncertainty: at the optimum, ``Cov(y) = s^2 (J^T J)^-1`` with ``s^2 = |r|^2 / (VN - p)``,
+pushed to the pixel intrinsics ``(fu, fv, u0, v0)`` through the Jacobian of that map.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float
+
+from ._camera import omega_matrix, omega_vector_from_intrinsics
+from ._field import DistanceField
+from ._homology import _tangent_basis, symmetry_residuals
+
+
+class BundleProblem(eqx.Module):
+    """Everything the bundle's residuals need besides its parameters (normalised
+    coordinates): per-view fields (stacked pytree), samples (V, N, 2), the vertices'
+    chart centres ``v0`` (V, 3) and tangent bases ``E`` (V, 3, 2), the known aspect
+    ratio (NaN for free aspect) and the pixel scale (pixels per normalised unit)."""
+
+    fields: DistanceField
+    samples: Float[Array, "V N 2"]
+    v0: Float[Array, "V 3"]
+    E: Float[Array, "V 3 2"]
+    aspect: Float[Array, ""]
+    scale: Float[Array, ""]
+
+
+def unpack_intrinsics(k, aspect):
+    """``(fu, fv, u0, v0)`` (normalised units) from the intrinsic parameters ``k``:
+    4 entries ``(log fu, log fv, u0, v0)``, or 3 ``(log fv, u0, v0)`` with
+    ``fu = aspect * fv``."""
+    if k.shape[-1] == 4:
+        return jnp.exp(k[0]), jnp.exp(k[1]), k[2], k[3]
+    fv = jnp.exp(k[0])
+    return aspect * fv, fv, k[1], k[2]
+
+
+def pack_intrinsics(fu, fv, u0, v0, free_aspect: bool):
+    if free_aspect:
+        return jnp.stack([jnp.log(fu), jnp.log(fv), u0, v0])
+    return jnp.stack([jnp.log(fv), u0, v0])
+
+
+def vertices(d: Float[Array, "V 2"], v0, E) -> Float[Array, "V 3"]:
+    v = v0 + jnp.einsum("vij,vj->vi", E, d)
+    return v / jnp.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def residuals(y, problem: BundleProblem) -> Float[Array, " VN"]:
+    """Stacked eq.-20 residuals of all views (normalised units) for ``y = (k, d)``."""
+    k, d = y
+    fu, fv, u0, v0 = unpack_intrinsics(k, problem.aspect)
+    omega = omega_matrix(omega_vector_from_intrinsics(fu, fv, u0, v0))
+    v = vertices(d, problem.v0, problem.E)
+    l = v @ omega  # omega is symmetric: l_j = omega v_j
+    r = jax.vmap(symmetry_residuals)(v, l, problem.samples, problem.fields)
+    return r.reshape(-1)
+
+
+_SOLVER = optx.LevenbergMarquardt(rtol=1e-9, atol=1e-9)
+
+
+@functools.partial(jax.jit, static_argnames=("max_steps",))
+def solve(y0, problem: BundleProblem, max_steps: int = 200):
+    """Levenberg-Marquardt from ``y0``; returns ``(y, result, steps, residuals)``."""
+    sol = optx.least_squares(residuals, _SOLVER, y0, args=problem, max_steps=max_steps, throw=False)
+    return sol.value, sol.result, sol.stats["num_steps"], residuals(sol.value, problem)
+
+
+@jax.jit
+def covariance(y, problem: BundleProblem, T):
+    """Covariance of the pixel intrinsics ``(fu, fv, u0, v0)`` at ``y``:
+    ``G (s^2 (J^T J)^-1) G^T`` with ``G`` the Jacobian of the pixel intrinsics in ``y``."""
+    flat, unravel = jax.flatten_util.ravel_pytree(y)
+    J = jax.jacfwd(lambda f: residuals(unravel(f), problem))(flat)
+    r = residuals(y, problem)
+    dof = jnp.maximum(r.shape[0] - flat.shape[0], 1)
+    s2 = jnp.sum(r**2) / dof
+    cov_y = s2 * jnp.linalg.pinv(J.T @ J)
+
+    def pixel_intrinsics(f):
+        fu, fv, u0, v0 = unpack_intrinsics(unravel(f)[0], problem.aspect)
+        # K = T^-1 K_n with T the isotropic similarity x_n = (x - c) / s
+        s, cx, cy = 1.0 / T[0, 0], -T[0, 2] / T[0, 0], -T[1, 2] / T[1, 1]
+        return jnp.stack([fu * s, fv * s, u0 * s + cx, v0 * s + cy])
+
+    G = jax.jacfwd(pixel_intrinsics)(flat)
+    return G @ cov_y @ G.T, s2
+
+
+def chart(v_seed: np.ndarray):
+    """Chart centres and tangent bases for the seeds' vertices (numpy, (V, 3))."""
+    v0 = v_seed / np.linalg.norm(v_seed, axis=1, keepdims=True)
+    return v0, np.stack([_tangent_basis(v) for v in v0])
+
+
+def fit_bundle(points_n, v_seeds_n, intrinsic_seeds, aspect, n_samples: int, max_steps: int = 200):
+    """Run the bundle from each intrinsic seed and keep the lowest final cost.
+
+    Args:
+        points_n: (V, M, 2) outlines in normalised coordinates.
+        v_seeds_n: (V, 3) per-view vertices from the homology fits (normalised).
+        intrinsic_seeds: list of ``(fu, fv, u0, v0)`` in normalised units.
+        aspect: known aspect ratio ``fu / fv`` or None (free).
+
+    Returns ``(y, result, steps, residuals, problem)`` of the best run.
+    """
+    fields, samples = _setup(jnp.asarray(points_n), n_samples)
+    v0, E = chart(np.asarray(v_seeds_n, dtype=np.float64))
+    problem = BundleProblem(
+        fields=fields,
+        samples=samples,
+        v0=jnp.asarray(v0),
+        E=jnp.asarray(E),
+        aspect=jnp.asarray(np.nan if aspect is None else float(aspect)),
+        scale=jnp.asarray(1.0),
+    )
+    best = None
+    d0 = jnp.zeros((len(v0), 2))
+    for fu, fv, u0, v0_ in intrinsic_seeds:
+        k0 = pack_intrinsics(jnp.asarray(fu), jnp.asarray(fv), jnp.asarray(u0), jnp.asarray(v0_), aspect is None)
+        y, res, steps, r = solve((k0, d0), problem, max_steps=max_steps)
+        cost = float(jnp.sum(r**2))
+        ok = bool(res == optx.RESULTS.successful) and np.isfinite(cost)
+        key = (not ok, cost if np.isfinite(cost) else np.inf)
+        if best is None or key < best[0]:
+            best = (key, y, res, steps, r)
+    _, y, res, steps, r = best
+    return y, res, steps, r, problem
+
+
+@functools.partial(jax.jit, static_argnames=("n_samples",))
+def _setup(points_n, n_samples: int):
+    from ._field import curve_points, make_field
+
+    fields = jax.vmap(make_field)(points_n)
+    samples = jax.vmap(lambda f: curve_points(f, n_samples))(fields)
+    return fields, samples
+
+
+import jax.flatten_util  # noqa: E402  (registers the submodule used above)
