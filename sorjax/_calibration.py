@@ -17,7 +17,7 @@ from jaxtyping import Array, Float, Int
 
 from ._camera import intrinsics_matrix, normalising_transform, omega_vector_from_intrinsics, omega_matrix
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
-from ._bundle import covariance, fit_bundle, unpack_intrinsics
+from ._bundle import covariance, fit_bundle, unpack_intrinsics, vertices
 from ._linear import method_i, method_ii
 from ._outline import DEFAULT_POINTS, as_outlines
 
@@ -63,7 +63,13 @@ class Calibration(eqx.Module):
         view_rms: (V,) RMS symmetry residual of each view, px: under the joint model
             for the bundle, of the free per-view fit for the linear methods.
         steps: optimiser steps (bundle; 0 for the linear methods).
+        v_x: (V, 3) the vertices used: jointly estimated for the bundle, the per-view
+            fits' for the linear methods (pixels, unit norm).
+        l_s: (V, 3) the axes: ``omega v_x`` for the bundle, the per-view fits' for the
+            linear methods (pixels, ``a^2 + b^2 = 1``).
         method: "I", "IIa", "IIb" or "bundle".
+        aspect_ratio: the known ``fu / fv`` imposed, or None when it was estimated
+            (always 1 for "I"/"IIb" without one).
     """
 
     K: Float[Array, "3 3"]
@@ -74,7 +80,10 @@ class Calibration(eqx.Module):
     cost: Float[Array, ""]
     view_rms: Float[Array, " V"]
     steps: Int[Array, ""]
+    v_x: Float[Array, "V 3"]
+    l_s: Float[Array, "V 3"]
     method: str = eqx.field(static=True)
+    aspect_ratio: float | None = eqx.field(static=True, default=None)
 
     @property
     def std(self) -> np.ndarray:
@@ -175,7 +184,12 @@ def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples) -> Calibra
     view_rms = jnp.sqrt(jnp.mean(rv**2, axis=1))
     cost = jnp.sum(rv**2)
     K = jnp.where(ok, K, jnp.nan)
-    return Calibration(K, omega, homologies, code, cov, cost, view_rms, steps, "bundle")
+    vx = vertices(y[1], problem.v0, problem.E) @ jnp.asarray(np.linalg.inv(T)).T
+    vx = vx / jnp.linalg.norm(vx, axis=1, keepdims=True)
+    ls = vx @ omega
+    ls = ls / jnp.linalg.norm(ls[:, :2], axis=1, keepdims=True)
+    a = None if aspect_ratio is None else float(aspect_ratio)
+    return Calibration(K, omega, homologies, code, cov, cost, view_rms, steps, vx, ls, "bundle", a)
 
 
 def calibrate(
@@ -229,7 +243,12 @@ def calibrate(
         K, omega, code = linear_calibration(homologies, method, T, aspect_ratio)
         nan = jnp.full((4, 4), jnp.nan)
         rms = jnp.stack([h.rms for h in homologies])
-        cal = Calibration(K, omega, tuple(homologies), code, nan, jnp.asarray(jnp.nan), rms, jnp.asarray(0), method)
+        vx = jnp.stack([h.v_x for h in homologies])
+        ls = jnp.stack([h.l_s for h in homologies])
+        a = None if method == "IIa" else (1.0 if aspect_ratio is None else float(aspect_ratio))
+        cal = Calibration(
+            K, omega, tuple(homologies), code, nan, jnp.asarray(jnp.nan), rms, jnp.asarray(0), vx, ls, method, a
+        )
     if throw and not cal.success:
         raise CalibrationError(cal.message)
     return cal

@@ -1,0 +1,112 @@
+"""Differentiable losses for use inside your own JAX code.
+
+Everything here is a pure function of arrays (and :class:`DistanceField` pytrees), so
+it composes with ``jax.jit``, ``jax.vmap``, ``jax.grad`` and optimistix.  Units are
+whatever the outline points are in (pixels unless you normalised them); homogeneous
+points and lines are 3-vectors.
+
+Typical use::
+
+    import jax, jax.numpy as jnp
+    import sorjax
+    from sorjax import losses
+
+    field = losses.distance_field(outline_points)          # (M, 2) evenly spaced points
+    samples = losses.outline_samples(field, 100)             # eq. 20's x_i
+    r = losses.symmetry_residuals(v_x, l_s, samples, field)  # d(W x_i), shape (100,)
+    g = jax.grad(lambda v: jnp.sum(losses.symmetry_residuals(v, l_s, samples, field) ** 2))(v_x)
+
+The bundle's residuals for V views, with ``l_s = omega v_x`` built in::
+
+    fields = jax.vmap(losses.distance_field)(points)          # points (V, M, 2)
+    samples = jax.vmap(lambda f: losses.outline_samples(f, 100))(fields)
+    r = losses.bundle_residuals(jnp.array([fu, fv, u0, v0]), v_x, samples, fields)  # (V, 100)
+
+and :func:`calibrated_intrinsics` re-solves the bundle from a :class:`Calibration`
+with implicit differentiation, so ``jax.grad`` / ``jax.jacobian`` of the intrinsics
+with respect to the outline points works (sensitivity studies).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float
+
+from ._bundle import BundleProblem, _SOLVER, chart, pack_intrinsics, residuals, unpack_intrinsics
+from ._camera import normalising_transform, omega_matrix, omega_vector_from_intrinsics
+from ._field import DistanceField, curve_points, signed_distance, signed_distances
+from ._field import make_field as _make_field
+from ._homology import homology_matrix, symmetry_residuals, transfer
+
+__all__ = [
+    "DistanceField",
+    "bundle_residuals",
+    "calibrated_intrinsics",
+    "distance_field",
+    "homology_matrix",
+    "outline_samples",
+    "signed_distance",
+    "signed_distances",
+    "symmetry_residuals",
+    "transfer",
+]
+
+
+def distance_field(points: Float[Array, "M 2"], smooth_samples: float = 0.0) -> DistanceField:
+    """Smooth signed distance field of a closed outline given by ``M`` points evenly
+    spaced in arc length (e.g. ``sorjax.make_outline(x).points``); positive outside.
+    ``smooth_samples`` > 0 first smooths the points along the curve (Gaussian, std in
+    samples) to suppress the outline's own noise."""
+    return _make_field(points, smooth_samples)
+
+
+def outline_samples(field: DistanceField, n: int) -> Float[Array, "n 2"]:
+    """``n`` points evenly spaced along the field's curve (the ``x_i`` of eq. 20)."""
+    return curve_points(field, n)
+
+
+def bundle_residuals(
+    intrinsics: Float[Array, "4"],
+    v_x: Float[Array, "V 3"],
+    samples: Float[Array, "V N 2"],
+    fields: DistanceField,
+) -> Float[Array, "V N"]:
+    """Residuals of the joint estimator: ``d_j(W_j x_ij)`` with
+    ``W_j = I - 2 v_j v_j^T omega / (v_j^T omega v_j)``, ``omega = K^-T K^-1`` from
+    ``intrinsics = (fu, fv, u0, v0)`` (same units as the points), zero skew."""
+    fu, fv, u0, v0 = (intrinsics[i] for i in range(4))
+    omega = omega_matrix(omega_vector_from_intrinsics(fu, fv, u0, v0))
+    l = v_x @ omega
+    return jax.vmap(symmetry_residuals)(v_x, l, samples, fields)
+
+
+def calibrated_intrinsics(points: Float[Array, "V M 2"], calibration, n_samples: int = 100) -> Float[Array, "4"]:
+    """``(fu, fv, u0, v0)`` in pixels from re-solving the bundle on ``points``
+    (V outlines, M evenly spaced pixel points each, e.g. the ``make_outline`` points the
+    calibration used), starting at ``calibration``'s estimate (its K and vertices) and
+    with its aspect-ratio model.  Differentiable in ``points`` by implicit
+    differentiation of the optimum (optimistix ``ImplicitAdjoint``); the coordinate
+    normalisation and the starting point are constants."""
+    pts = np.asarray(jax.lax.stop_gradient(points))
+    T = normalising_transform(pts.reshape(-1, 2))
+    Tj = jnp.asarray(T)
+    pn = points @ Tj[:2, :2].T + Tj[:2, 2]
+    v0, E = chart(np.asarray(calibration.v_x) @ T.T)
+    fields = jax.vmap(_make_field)(pn)
+    samples = jax.vmap(lambda f: curve_points(f, n_samples))(fields)
+    a = calibration.aspect_ratio
+    problem = BundleProblem(
+        fields, samples, jnp.asarray(v0), jnp.asarray(E), jnp.asarray(np.nan if a is None else a), jnp.asarray(1.0)
+    )
+    Kn = T @ np.asarray(calibration.K)
+    k0 = pack_intrinsics(*(jnp.asarray(x) for x in (Kn[0, 0], Kn[1, 1], Kn[0, 2], Kn[1, 2])), a is None)
+    sol = optx.least_squares(
+        residuals, _SOLVER, (k0, jnp.zeros((len(v0), 2))), args=problem, max_steps=200, throw=False,
+        adjoint=optx.ImplicitAdjoint(),
+    )
+    fu, fv, u0, v0_ = unpack_intrinsics(sol.value[0], problem.aspect)
+    s = 1.0 / T[0, 0]
+    return jnp.stack([fu * s, fv * s, (u0 - T[0, 2]) * s, (v0_ - T[1, 2]) * s])
