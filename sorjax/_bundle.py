@@ -35,7 +35,7 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from ._camera import omega_matrix, omega_vector_from_intrinsics
-from ._field import DistanceField
+from ._field import DistanceField, curve_points, make_field, sample_weights
 from ._homology import _tangent_basis, symmetry_residuals
 
 
@@ -47,6 +47,7 @@ class BundleProblem(eqx.Module):
 
     fields: DistanceField
     samples: Float[Array, "V N 2"]
+    weights: Float[Array, "V N"]
     v0: Float[Array, "V 3"]
     E: Float[Array, "V 3 2"]
     aspect: Float[Array, ""]
@@ -81,7 +82,7 @@ def residuals(y, problem: BundleProblem) -> Float[Array, " VN"]:
     omega = omega_matrix(omega_vector_from_intrinsics(fu, fv, u0, v0))
     v = vertices(d, problem.v0, problem.E)
     l = v @ omega  # omega is symmetric: l_j = omega v_j
-    r = jax.vmap(symmetry_residuals)(v, l, problem.samples, problem.fields)
+    r = jax.vmap(symmetry_residuals)(v, l, problem.samples, problem.fields, problem.weights)
     return r.reshape(-1)
 
 
@@ -102,7 +103,7 @@ def covariance(y, problem: BundleProblem, T):
     flat, unravel = jax.flatten_util.ravel_pytree(y)
     J = jax.jacfwd(lambda f: residuals(unravel(f), problem))(flat)
     r = residuals(y, problem)
-    dof = jnp.maximum(r.shape[0] - flat.shape[0], 1)
+    dof = jnp.maximum(jnp.sum(problem.weights) - flat.shape[0], 1)
     s2 = jnp.sum(r**2) / dof
     cov_y = s2 * jnp.linalg.pinv(J.T @ J)
 
@@ -133,11 +134,12 @@ def fit_bundle(points_n, v_seeds_n, intrinsic_seeds, aspect, n_samples: int, max
 
     Returns ``(y, result, steps, residuals, problem)`` of the best run.
     """
-    fields, samples = _setup(jnp.asarray(points_n), n_samples)
+    fields, samples, weights = _setup(jnp.asarray(points_n), n_samples)
     v0, E = chart(np.asarray(v_seeds_n, dtype=np.float64))
     problem = BundleProblem(
         fields=fields,
         samples=samples,
+        weights=weights,
         v0=jnp.asarray(v0),
         E=jnp.asarray(E),
         aspect=jnp.asarray(np.nan if aspect is None else float(aspect)),
@@ -159,11 +161,10 @@ def fit_bundle(points_n, v_seeds_n, intrinsic_seeds, aspect, n_samples: int, max
 
 @functools.partial(jax.jit, static_argnames=("n_samples",))
 def _setup(points_n, n_samples: int):
-    from ._field import curve_points, make_field
-
     fields = jax.vmap(make_field)(points_n)
     samples = jax.vmap(lambda f: curve_points(f, n_samples))(fields)
-    return fields, samples
+    weights = jax.vmap(lambda f: sample_weights(f, n_samples))(fields)
+    return fields, samples, weights
 
 
 import jax.flatten_util  # noqa: E402  (registers the submodule used above)

@@ -48,7 +48,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from ._camera import normalising_transform, transform_points
-from ._field import DistanceField, curve_points, make_field, signed_distances
+from ._field import DistanceField, curve_points, make_field, sample_weights, signed_distances
 from ._outline import DEFAULT_POINTS, Outline, make_outline
 
 DEFAULT_SAMPLES = 100
@@ -97,11 +97,14 @@ def transfer(W: Float[Array, "3 3"], x: Float[Array, "N 2"]) -> Float[Array, "N 
 
 
 def symmetry_residuals(
-    v: Float[Array, "3"], l: Float[Array, "3"], samples: Float[Array, "N 2"], field: DistanceField
+    v: Float[Array, "3"], l: Float[Array, "3"], samples: Float[Array, "N 2"], field: DistanceField, weights=None
 ) -> Float[Array, "N"]:
-    """The residuals of eq. 20: ``d(W(v, l) x_i)`` for each sample ``x_i``, in the units
-    of the field (pixels if the field and samples are in pixels)."""
-    return signed_distances(field, transfer(homology_matrix(v, l), samples))
+    """The residuals of eq. 20: ``w_i d(W(v, l) x_i)`` for each sample ``x_i``, in the
+    units of the field (pixels if the field and samples are in pixels); ``weights``
+    ``w_i`` default to 1 (:func:`sorjax._field.sample_weights` zeroes samples at
+    corners)."""
+    r = signed_distances(field, transfer(homology_matrix(v, l), samples))
+    return r if weights is None else r * weights
 
 
 def _tangent_basis(v0: np.ndarray) -> np.ndarray:
@@ -238,35 +241,34 @@ def mirror_candidates(points_n: np.ndarray, samples, keep: int = 3):
 
 
 def _residuals(p, args):
-    field, samples, v0, E = args
+    field, samples, weights, v0, E = args
     v, l = _unpack(p, v0, E)
-    return symmetry_residuals(v, l, samples, field)
+    return symmetry_residuals(v, l, samples, field, weights)
 
 
 _SOLVER = optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10)
 
 
-def refine(field: DistanceField, samples, p0, v0, E, max_steps: int = 100):
+def refine(field: DistanceField, samples, weights, p0, v0, E, max_steps: int = 100):
     """Levenberg-Marquardt on eq. 20 from one start ``(p0, v0, E)`` (normalised
     coordinates).  Returns ``(v, l, cost, converged, steps)``; pure, jit/vmap-able."""
-    sol = optx.least_squares(
-        _residuals, _SOLVER, p0, args=(field, samples, v0, E), max_steps=max_steps, throw=False
-    )
+    args = (field, samples, weights, v0, E)
+    sol = optx.least_squares(_residuals, _SOLVER, p0, args=args, max_steps=max_steps, throw=False)
     v, l = _unpack(sol.value, v0, E)
-    r = _residuals(sol.value, (field, samples, v0, E))
+    r = _residuals(sol.value, args)
     return v, l, jnp.sum(r**2), sol.result == optx.RESULTS.successful, sol.stats["num_steps"]
 
 
 @functools.partial(jax.jit, static_argnames=("n_samples",))
 def _view_setup(points_n, n_samples: int):
     field = make_field(points_n)
-    return field, curve_points(field, n_samples)
+    return field, curve_points(field, n_samples), sample_weights(field, n_samples)
 
 
 _refine_jit = jax.jit(refine, static_argnames=("max_steps",))
 
 
-def _refine_candidates(field, samples, cands, max_steps: int = 100):
+def _refine_candidates(field, samples, weights, cands, max_steps: int = 100):
     """Refine each start ``(v, l)`` (normalised coordinates) and keep the lowest cost.
 
     A Python loop over one compiled solve: on CPU this beats ``vmap``, which would step
@@ -274,7 +276,7 @@ def _refine_candidates(field, samples, cands, max_steps: int = 100):
     best = None
     for v0, l0 in cands:
         p0, v0, E = (jnp.asarray(a) for a in _pack(v0, l0))
-        out = _refine_jit(field, samples, p0, v0, E, max_steps=max_steps)
+        out = _refine_jit(field, samples, weights, p0, v0, E, max_steps=max_steps)
         cost = float(out[2])
         if np.isfinite(cost) and (best is None or cost < best[2]):
             best = (out[0], out[1], cost, out[3], out[4])
@@ -329,11 +331,11 @@ def fit_homology(
     T = normalising_transform(pts)
     scale = 1.0 / T[0, 0]
     pn = np.asarray(transform_points(T, pts))
-    field, samples = _view_setup(jnp.asarray(pn), n_samples)
+    field, samples, weights = _view_setup(jnp.asarray(pn), n_samples)
     if init is not None:
         v0, l0 = (np.asarray(a, dtype=np.float64) for a in init)
         cands = [(T @ v0, np.linalg.solve(T.T, l0))]
     else:
         cands = bitangent_candidates(pn) + mirror_candidates(pn, samples)
-    v, l, cost, ok, steps = _refine_candidates(field, samples, cands, max_steps=max_steps)
-    return _to_pixels(T, v, l, cost, ok, steps, scale, n_samples)
+    v, l, cost, ok, steps = _refine_candidates(field, samples, weights, cands, max_steps=max_steps)
+    return _to_pixels(T, v, l, cost, ok, steps, scale, float(jnp.sum(weights)))

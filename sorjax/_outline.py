@@ -150,12 +150,25 @@ def validate_points(points, *, name: str = "outline") -> np.ndarray:
 
 def resample_closed(points: np.ndarray, n: int) -> np.ndarray:
     """Resample a closed polyline (N, 2) to ``n`` points evenly spaced in arc length,
-    starting at its first point (linear interpolation along the polyline)."""
+    starting at its first point.
+
+    Between input points the curve is a cubic Hermite (Catmull-Rom) interpolant in
+    arc length, with tangents by central differences: it passes through every input
+    point, and for a smooth curve sampled at spacing ``h`` with radius ``R`` it stays
+    within about ``h^4 / R^3`` of it, where straight chords would cut ``h^2 / (8 R)``
+    inside.  (Arc length is measured along the chords.)"""
     p = np.asarray(points, dtype=np.float64)
-    q = np.vstack([p, p[:1]])
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q, axis=0), axis=1))])
+    m = len(p)
+    h = np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1)  # segment i: p_i -> p_{i+1}
+    s = np.concatenate([[0.0], np.cumsum(h)])
+    tan = (np.roll(p, -1, axis=0) - np.roll(p, 1, axis=0)) / (h + np.roll(h, 1))[:, None]
     t = np.linspace(0.0, s[-1], n, endpoint=False)
-    return np.stack([np.interp(t, s, q[:, 0]), np.interp(t, s, q[:, 1])], axis=1)
+    i = np.clip(np.searchsorted(s, t, side="right") - 1, 0, m - 1)
+    u = ((t - s[i]) / h[i])[:, None]
+    j = (i + 1) % m
+    hi = h[i][:, None]
+    h00, h10, h01, h11 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u, -2 * u**3 + 3 * u**2, u**3 - u**2
+    return h00 * p[i] + h10 * hi * tan[i] + h01 * p[j] + h11 * hi * tan[j]
 
 
 def make_outline(points, n_points: int = DEFAULT_POINTS, *, name: str = "outline") -> Outline:

@@ -37,7 +37,7 @@ from jaxtyping import Array, Float
 
 from ._bundle import BundleProblem, _SOLVER, chart, pack_intrinsics, residuals, unpack_intrinsics
 from ._camera import normalising_transform, omega_matrix, omega_vector_from_intrinsics
-from ._field import DistanceField, curve_points, signed_distance, signed_distances
+from ._field import DistanceField, curve_points, sample_weights, signed_distance, signed_distances
 from ._field import make_field as _make_field
 from ._homology import homology_matrix, symmetry_residuals, transfer
 
@@ -97,9 +97,10 @@ def calibrated_intrinsics(points: Float[Array, "V M 2"], calibration, n_samples:
     v0, E = chart(np.asarray(calibration.v_x) @ T.T)
     fields = jax.vmap(_make_field)(pn)
     samples = jax.vmap(lambda f: curve_points(f, n_samples))(fields)
+    weights = jax.vmap(lambda f: sample_weights(f, n_samples))(fields)
     a = calibration.aspect_ratio
     problem = BundleProblem(
-        fields, samples, jnp.asarray(v0), jnp.asarray(E), jnp.asarray(np.nan if a is None else a), jnp.asarray(1.0)
+        fields, samples, weights, jnp.asarray(v0), jnp.asarray(E), jnp.asarray(np.nan if a is None else a), jnp.asarray(1.0)
     )
     Kn = T @ np.asarray(calibration.K)
     k0 = pack_intrinsics(*(jnp.asarray(x) for x in (Kn[0, 0], Kn[1, 1], Kn[0, 2], Kn[1, 2])), a is None)
