@@ -135,25 +135,30 @@ def signed_distances(field: DistanceField, x: Float[Array, "N 2"]) -> Float[Arra
     return jax.vmap(signed_distance, in_axes=(None, 0))(field, x)
 
 
-CORNER_MIN_DEG = 3.0
-CORNER_RATIO = 10.0
+CORNER_MIN_DEG = 1.5
+CORNER_RATIO = 4.0
 CORNER_GUARD = 12
 
 
 def corner_knots(field: DistanceField) -> Float[Array, " M"]:
-    """1.0 at knots where the outline turns sharply (a corner: the waist of the two
-    spheres, a rim meeting a body, an occlusion junction), else 0.0.
+    """1.0 at knots where the outline turns abruptly (a corner: the waist of the two
+    spheres, a rim meeting a body, an occlusion junction, a jump of curvature), else 0.
 
-    A knot is a corner when its turning angle exceeds both ``CORNER_MIN_DEG`` degrees
-    and ``CORNER_RATIO`` times the median turning angle (so that noise, which turns
-    every knot, does not make corners).  Near a corner the interpolating spline rings
-    (by a factor ~0.27 per knot), so distances read there are less accurate."""
+    With ``turn_i`` the turning angle at knot ``i``, a corner concentrates its angle in
+    one or two knots: ``spike_i = turn_i + max(turn_{i-1}, turn_{i+1})``.  The local
+    baseline ``b_i`` is the median turning angle over knots ``i +- 3..6``.  Knot ``i`` is
+    a corner when ``spike_i - 2 b_i > max(CORNER_MIN_DEG, CORNER_RATIO b_i)``: a smooth
+    curve turns evenly and noise turns every knot, neither makes a spike.  Near a
+    corner the interpolating spline rings (decaying by ~0.27 per knot), so distances
+    read there are less accurate."""
     p = field.knots
     a = p - jnp.roll(p, 1, axis=-2)
     b = jnp.roll(p, -1, axis=-2) - p
     turn = jnp.abs(jnp.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], jnp.sum(a * b, -1)))
-    thr = jnp.maximum(jnp.radians(CORNER_MIN_DEG), CORNER_RATIO * jnp.median(turn))
-    return (turn > thr).astype(p.dtype)
+    spike = turn + jnp.maximum(jnp.roll(turn, 1), jnp.roll(turn, -1))
+    base = jnp.median(jnp.stack([jnp.roll(turn, k) for k in (-6, -5, -4, -3, 3, 4, 5, 6)]), axis=0)
+    thr = jnp.maximum(jnp.radians(CORNER_MIN_DEG), CORNER_RATIO * base)
+    return (spike - 2.0 * base > thr).astype(p.dtype)
 
 
 def sample_weights(field: DistanceField, n: int) -> Float[Array, " n"]:
