@@ -187,7 +187,7 @@ def bitangent_candidates(p: np.ndarray, max_pockets: int = 4) -> list[tuple[np.n
     ``a1 <-> b2`` and ``a2 <-> b1``.
     """
     scale = np.sqrt(np.mean(np.sum((p - p.mean(0)) ** 2, axis=1)))
-    pockets = _pockets(p, min_depth=0.01 * scale)[:max_pockets]
+    pockets = _pockets(p, min_depth=0.03 * scale)[:max_pockets]
     cands = []
     for i in range(len(pockets)):
         for j in range(i + 1, len(pockets)):
@@ -262,42 +262,50 @@ def _residuals(p, args):
 
 
 _SOLVER = optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10)
+_SOLVER_COARSE = optx.LevenbergMarquardt(rtol=1e-4, atol=1e-6)
+COARSE_STEPS = 15
 
 
-def refine(field: DistanceField, samples, weights, p0, v0, E, max_steps: int = 100):
+def refine(field: DistanceField, samples, weights, p0, v0, E, max_steps: int = 100, coarse: bool = False):
     """Levenberg-Marquardt on eq. 20 from one start ``(p0, v0, E)`` (normalised
-    coordinates).  Returns ``(v, l, cost, converged, steps)``; pure, jit/vmap-able."""
+    coordinates).  Returns ``(v, l, cost, converged, steps, p)``; pure, jit/vmap-able.
+    ``coarse`` uses loose tolerances (the screening stage of :func:`fit_homology`)."""
     args = (field, samples, weights, v0, E)
-    sol = optx.least_squares(_residuals, _SOLVER, p0, args=args, max_steps=max_steps, throw=False)
+    solver = _SOLVER_COARSE if coarse else _SOLVER
+    sol = optx.least_squares(_residuals, solver, p0, args=args, max_steps=max_steps, throw=False)
     v, l = _unpack(sol.value, v0, E)
     r = _residuals(sol.value, args)
-    return v, l, jnp.sum(r**2), sol.result == optx.RESULTS.successful, sol.stats["num_steps"]
+    return v, l, jnp.sum(r**2), sol.result == optx.RESULTS.successful, sol.stats["num_steps"], sol.value
 
 
-@functools.partial(jax.jit, static_argnames=("n_samples",))
-def _view_setup(points_n, n_samples: int):
-    field = make_field(points_n)
+@functools.partial(jax.jit, static_argnames=("n_samples", "smooth"))
+def _view_setup(points_n, n_samples: int, smooth: float = 0.0):
+    field = make_field(points_n, smooth)
     return field, curve_points(field, n_samples), sample_weights(field, n_samples)
 
 
-_refine_jit = jax.jit(refine, static_argnames=("max_steps",))
+_refine_jit = jax.jit(refine, static_argnames=("max_steps", "coarse"))
 
 
 def _refine_candidates(field, samples, weights, cands, max_steps: int = 100):
-    """Refine each start ``(v, l)`` (normalised coordinates) and keep the lowest cost.
+    """Screen every start ``(v, l)`` (normalised coordinates) with a few loose
+    Levenberg-Marquardt steps, then refine the lowest-cost one to convergence.
 
     A Python loop over one compiled solve: on CPU this beats ``vmap``, which would step
     every candidate until the slowest one converges."""
     best = None
     for v0, l0 in cands:
-        p0, v0, E = (jnp.asarray(a) for a in _pack(v0, l0))
-        out = _refine_jit(field, samples, weights, p0, v0, E, max_steps=max_steps)
+        start = tuple(jnp.asarray(a) for a in _pack(v0, l0))
+        out = _refine_jit(field, samples, weights, *start, max_steps=COARSE_STEPS, coarse=True)
         cost = float(out[2])
-        if np.isfinite(cost) and (best is None or cost < best[2]):
-            best = (out[0], out[1], cost, out[3], out[4])
+        if np.isfinite(cost) and (best is None or cost < best[0]):
+            best = (cost, out, start)
     if best is None:
         raise FloatingPointError("every start of the homology fit gave a non-finite cost")
-    return best
+    _, out, (_, v0, E) = best
+    steps0 = out[4]
+    out = _refine_jit(field, samples, weights, out[5], v0, E, max_steps=max_steps)
+    return out[0], out[1], float(out[2]), out[3], out[4] + steps0
 
 
 def _to_pixels(T: np.ndarray, v, l, cost, ok, steps, scale, n_samples) -> Homology:
@@ -325,6 +333,7 @@ def fit_homology(
     n_points: int = DEFAULT_POINTS,
     init=None,
     max_steps: int = 100,
+    smooth_px: float = 0.0,
 ) -> Homology:
     """Fit the harmonic homology of one outline by minimising eq. 20.
 
@@ -337,6 +346,9 @@ def fit_homology(
             default the start is found automatically (bitangents of the convex hull
             and a symmetry-axis search, the lowest final cost wins).
         max_steps: Levenberg-Marquardt step limit.
+        smooth_px: smooth the outline along the curve (Gaussian, std in px of arc
+            length) before building its distance field and samples; 0 (default) uses
+            the outline as given.
 
     Returns:
         :class:`Homology` in pixels, with the RMS symmetry residual in px.
@@ -346,7 +358,8 @@ def fit_homology(
     T = normalising_transform(pts)
     scale = 1.0 / T[0, 0]
     pn = np.asarray(transform_points(T, pts))
-    field, samples, weights = _view_setup(jnp.asarray(pn), n_samples)
+    smooth = float(smooth_px) / (float(np.asarray(o.perimeter())) / o.n_points) if smooth_px else 0.0
+    field, samples, weights = _view_setup(jnp.asarray(pn), n_samples, smooth)
     if init is not None:
         v0, l0 = (np.asarray(a, dtype=np.float64) for a in init)
         cands = [(T @ v0, np.linalg.solve(T.T, l0))]

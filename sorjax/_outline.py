@@ -50,8 +50,8 @@ def signed_area(p) -> Float[Array, ""]:
 def _segments_cross(p: np.ndarray) -> bool:
     """True when two non-adjacent edges of the closed polygon ``p`` (n, 2) cross."""
     n = len(p)
-    if n > 400:  # decimate: crossings at a finer scale than this are noise-level
-        p = p[np.linspace(0, n, 400, endpoint=False).astype(int)]
+    if n > 200:  # decimate: loops smaller than ~1/200 of the outline are noise, not an error
+        p = p[np.linspace(0, n, 200, endpoint=False).astype(int)]
         n = len(p)
     a, b = p, np.roll(p, -1, axis=0)
     d = b - a

@@ -13,7 +13,8 @@ Typical use::
 
     field = losses.distance_field(outline_points)          # (M, 2) evenly spaced points
     samples = losses.outline_samples(field, 100)             # eq. 20's x_i
-    r = losses.symmetry_residuals(v_x, l_s, samples, field)  # d(W x_i), shape (100,)
+    w = losses.sample_weights(field, 100)                    # 0 at corners, else 1
+    r = losses.symmetry_residuals(v_x, l_s, samples, field, w)  # w_i d(W x_i), (100,)
     g = jax.grad(lambda v: jnp.sum(losses.symmetry_residuals(v, l_s, samples, field) ** 2))(v_x)
 
 The bundle's residuals for V views, with ``l_s = omega v_x`` built in::
@@ -48,6 +49,7 @@ __all__ = [
     "distance_field",
     "homology_matrix",
     "outline_samples",
+    "sample_weights",
     "signed_distance",
     "signed_distances",
     "symmetry_residuals",

@@ -490,7 +490,7 @@ def _visible_pieces(path: _Path, spacing: float, coarse_gap: float, min_len: flo
         while j + 1 < n and vis[j + 1]:
             j += 1
         ts = list(tau[i : j + 1])
-        if i > 0 and tau[i - 1 + 1] != bmap[i - 1]:
+        if i > 0 and tau[i] != bmap[i - 1]:
             ts.insert(0, bmap[i - 1])
         if j < n - 1 and tau[j] != bmap[j]:
             ts.append(bmap[j])
@@ -875,22 +875,24 @@ def _pchip(x: np.ndarray, v: np.ndarray):
         d[0] = end(h[0], h[1], m[0], m[1])
         d[-1] = end(h[-1], h[-2], m[-1], m[-2])
 
+    # power-basis coefficients of each cubic in u = t - x_k (Horner evaluation)
+    c0, c1 = v[:-1], d[:-1]
+    c2 = (3.0 * m - 2.0 * d[:-1] - d[1:]) / h
+    c3 = (d[:-1] + d[1:] - 2.0 * m) / h**2
+    inner = x[1:-1]
+
     def locate(t):
         t = np.asarray(t, dtype=np.float64)
-        k = np.clip(np.searchsorted(x, t, side="right") - 1, 0, n - 2)
-        return t, k, (t - x[k]) / h[k]
+        k = np.searchsorted(inner, t, side="right")
+        return k, t - x[k]
 
     def f(t):
-        t, k, s = locate(t)
-        s2, s3 = s * s, s * s * s
-        return ((2 * s3 - 3 * s2 + 1) * v[k] + (s3 - 2 * s2 + s) * h[k] * d[k]
-                + (-2 * s3 + 3 * s2) * v[k + 1] + (s3 - s2) * h[k] * d[k + 1])
+        k, u = locate(t)
+        return ((c3[k] * u + c2[k]) * u + c1[k]) * u + c0[k]
 
     def df(t):
-        t, k, s = locate(t)
-        s2 = s * s
-        return ((6 * s2 - 6 * s) * (v[k] - v[k + 1]) / h[k] + (3 * s2 - 4 * s + 1) * d[k]
-                + (3 * s2 - 2 * s) * d[k + 1])
+        k, u = locate(t)
+        return (3.0 * c3[k] * u + 2.0 * c2[k]) * u + c1[k]
 
     return f, df
 
@@ -1578,7 +1580,9 @@ def outline_normals(outline) -> np.ndarray:
     return s * np.column_stack([T[:, 1], -T[:, 0]])
 
 
-def paper_noise(outline, sigma: float, seed_or_rng: SeedLike, *, smooth_px: float = 2.0) -> np.ndarray:
+def paper_noise(
+    outline, sigma: float, seed_or_rng: SeedLike, *, smooth_px: float = 2.0, preserve_std: bool = False
+) -> np.ndarray:
     """The paper's noise: each outline point moved along its normal by smoothed uniform noise.
 
     Exactly:
@@ -1588,11 +1592,15 @@ def paper_noise(outline, sigma: float, seed_or_rng: SeedLike, *, smooth_px: floa
        ``u_k ~ U(-sigma, sigma)`` i.i.d. at arc-length spacing ``L / N``,
        ``delta = min(1, smooth_px / 2)`` px;
     3. circular convolution with a normalised periodic Gaussian of standard deviation
-       ``smooth_px`` px of arc length, then multiplication by ``1 / sqrt(sum w_k^2)``
-       (``w`` the kernel weights) so that the marginal standard deviation is again
-       ``sigma / sqrt(3)``, that of the raw uniform noise, and clipping to
-       ``[-sigma, sigma]`` so that the maximum displacement is ``sigma`` (about 8 % of
-       the values are clipped);
+       ``smooth_px`` px of arc length: the paper's text, literally ("uniform random
+       noise of maximum sigma ... the magnitudes of the noise were smoothed by a
+       Gaussian filter").  Smoothing lowers the amplitude: with the default 2 px the
+       displacement's standard deviation is about ``0.22 sigma`` (``sigma / sqrt(3)``
+       times ``1 / sqrt(2 sqrt(pi) smooth_px / delta)``).  With ``preserve_std=True``
+       the smoothed magnitudes are instead multiplied by ``1 / sqrt(sum w_k^2)`` (``w``
+       the kernel weights) so that the marginal standard deviation is again
+       ``sigma / sqrt(3)``, that of the raw uniform noise, and clipped to
+       ``[-sigma, sigma]`` (about 8 % of the values are clipped);
     4. periodic linear interpolation at ``s_i`` and displacement of point ``i`` by that
        amount along its outward normal (:func:`outline_normals`).
 
@@ -1620,8 +1628,9 @@ def paper_noise(outline, sigma: float, seed_or_rng: SeedLike, *, smooth_px: floa
         dist = np.minimum(k, N - k) * delta
         wgt = np.exp(-0.5 * (dist / smooth_px) ** 2)
         wgt /= wgt.sum()
-        sm = np.real(np.fft.ifft(np.fft.fft(u) * np.fft.fft(wgt))) / math.sqrt(np.sum(wgt**2))
-        sm = np.clip(sm, -sigma, sigma)
+        sm = np.real(np.fft.ifft(np.fft.fft(u) * np.fft.fft(wgt)))
+        if preserve_std:
+            sm = np.clip(sm / math.sqrt(np.sum(wgt**2)), -sigma, sigma)
         pos = s / delta
         i0 = np.floor(pos).astype(np.int64)
         fr = pos - i0

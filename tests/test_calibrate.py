@@ -1,0 +1,94 @@
+"""calibrate(): Methods I / IIa / IIb and the bundle against ground truth, bad input."""
+
+import numpy as np
+import pytest
+
+import sorjax
+from sorjax import scenes
+
+
+@pytest.fixture(scope="module")
+def spheres():
+    sc = scenes.two_spheres(f=700.0)
+    homs = tuple(sorjax.fit_homology(o) for o in sc.outlines)
+    return sc, homs
+
+
+def rel_err(cal, K):
+    return np.abs(np.array([cal.fu - K[0, 0], cal.fv - K[1, 1], cal.u0 - K[0, 2], cal.v0 - K[1, 2]])) / K[1, 1]
+
+
+@pytest.mark.parametrize("method", ["I", "IIa", "IIb", "bundle"])
+def test_noise_free_two_spheres(spheres, method):
+    sc, homs = spheres
+    cal = sorjax.calibrate(sc.outlines, method=method, homologies=homs)
+    assert cal.success, cal.message
+    assert rel_err(cal, sc.K).max() < 1e-4  # 0.01 % of f
+    assert cal.method == method
+
+
+def test_known_aspect_ratio_methods_I_and_IIb():
+    sc = scenes.two_spheres(f=800.0, aspect_ratio=1.05)
+    homs = tuple(sorjax.fit_homology(o) for o in sc.outlines)
+    for m in ("I", "IIb", "bundle"):
+        cal = sorjax.calibrate(sc.outlines, method=m, aspect_ratio=1.05, homologies=homs)
+        assert cal.success
+        assert rel_err(cal, sc.K).max() < 1e-4, (m, rel_err(cal, sc.K))
+        np.testing.assert_allclose(cal.fu / cal.fv, 1.05, rtol=1e-12)
+    wrong = sorjax.calibrate(sc.outlines, method="IIb", homologies=homs)  # unit aspect: biased
+    assert rel_err(wrong, sc.K).max() > 1e-3
+    free = sorjax.calibrate(sc.outlines, method="IIa", homologies=homs)  # free aspect recovers it
+    assert rel_err(free, sc.K).max() < 1e-4
+
+
+def test_noisy_ordering_and_bundle_uncertainty(spheres):
+    """With noise the bundle is at least as good as IIb here and reports a std."""
+    sc, _ = spheres
+    outs = [scenes.paper_noise(o, 1.0, 10 + i) for i, o in enumerate(sc.outlines)]
+    cal_b = sorjax.calibrate(outs)
+    assert cal_b.method == "bundle" and cal_b.success
+    assert np.all(np.isfinite(cal_b.std)) and np.all(cal_b.std > 0)
+    assert rel_err(cal_b, sc.K).max() < 0.05
+    assert np.all(np.asarray(cal_b.view_rms) < 1.0)
+
+
+def test_result_code_when_not_positive_definite(spheres):
+    sc, homs = spheres
+    # two views only, and one of them mirrored: inconsistent with any real camera
+    flipped = sc.outlines[1].copy()
+    flipped[:, 0] = 2 * 320 - flipped[:, 0]
+    cal = sorjax.calibrate([sc.outlines[0], flipped], method="IIa")
+    if not cal.success:
+        assert "positive definite" in cal.message
+        assert np.isnan(cal.fu)
+        with pytest.raises(sorjax.CalibrationError):
+            sorjax.calibrate([sc.outlines[0], flipped], method="IIa", throw=True)
+
+
+@pytest.mark.parametrize(
+    "outlines, words",
+    [
+        ([np.random.default_rng(0).normal(size=(50, 2))], "a list of outlines"),
+        ("not outlines", "outline 0"),
+        ([], "at least two"),
+    ],
+)
+def test_bad_calls(outlines, words):
+    with pytest.raises(ValueError, match=words):
+        sorjax.calibrate(outlines[0] if isinstance(outlines, list) and len(outlines) == 1 else outlines)
+
+
+def test_single_view_and_bad_points(spheres):
+    sc, _ = spheres
+    with pytest.raises(ValueError, match="at least two"):
+        sorjax.calibrate([sc.outlines[0]])
+    bad = sc.outlines[1].copy()
+    bad[5] = np.nan
+    with pytest.raises(ValueError, match="outline 1.*NaN"):
+        sorjax.calibrate([sc.outlines[0], bad])
+    with pytest.raises(ValueError, match="method"):
+        sorjax.calibrate(sc.outlines, method="III")
+    with pytest.raises(ValueError, match="aspect_ratio"):
+        sorjax.calibrate(sc.outlines, method="IIb", aspect_ratio=-1.0)
+    with pytest.raises(ValueError, match="IIa"):
+        sorjax.calibrate(sc.outlines, method="IIa", aspect_ratio=1.1)
