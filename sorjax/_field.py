@@ -166,8 +166,9 @@ def sample_weights(field: DistanceField, n: int) -> Float[Array, " n"]:
     ``CORNER_GUARD`` knots of a corner (:func:`corner_knots`), else 1.  Corners map to
     corners under the homology, so the guard keeps both the samples and their images
     off the ringing part of the spline (which matters at the 1e-3 px level: for exact
-    outlines).  When the guard would drop more than a tenth of the samples the outline
-    is noisy (noise, not geometry, makes the spikes) and every weight is 1."""
+    outlines).  When more than 3 % of the knots are corners the outline is noisy
+    (noise, not geometry, makes the spikes: exact outlines have a handful) and every
+    weight is 1."""
     m = field.n_knots
     c = corner_knots(field)
     near = jnp.zeros_like(c)
@@ -175,7 +176,7 @@ def sample_weights(field: DistanceField, n: int) -> Float[Array, " n"]:
         near = jnp.maximum(near, jnp.roll(c, k))
     idx = jnp.round(jnp.arange(n) * (m / n)).astype(jnp.int32) % m
     w = 1.0 - near[idx]
-    return jnp.where(jnp.sum(w) < 0.9 * n, jnp.ones_like(w), w)
+    return jnp.where(jnp.sum(c) > 0.03 * m, jnp.ones_like(w), w)
 
 
 def curve_points(field: DistanceField, n: int) -> Float[Array, "n 2"]:
