@@ -86,7 +86,7 @@ def residuals(y, problem: BundleProblem) -> Float[Array, " VN"]:
     return r.reshape(-1)
 
 
-_SOLVER = optx.LevenbergMarquardt(rtol=1e-9, atol=1e-9)
+_SOLVER = optx.LevenbergMarquardt(rtol=1e-7, atol=1e-9)
 
 
 @functools.partial(jax.jit, static_argnames=("max_steps",))
