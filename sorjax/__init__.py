@@ -12,15 +12,21 @@ _jax.config.update("jax_enable_x64", True)
 from ._calibration import RESULTS, Calibration, CalibrationError, calibrate  # noqa: E402
 from ._homology import Homology, fit_homology, homology_matrix  # noqa: E402
 from ._outline import Outline, make_outline  # noqa: E402
+from ._uncertainty import ErrorPrediction, predicted_error  # noqa: E402
+from . import losses, scenes  # noqa: E402
 
 __all__ = [
     "RESULTS",
     "Calibration",
     "CalibrationError",
+    "ErrorPrediction",
     "Homology",
     "Outline",
     "calibrate",
     "fit_homology",
     "homology_matrix",
+    "losses",
     "make_outline",
+    "predicted_error",
+    "scenes",
 ]

@@ -123,8 +123,18 @@ def closest_parameter(field: DistanceField, x: Float[Array, "2"]) -> Float[Array
 
 def signed_distance(field: DistanceField, x: Float[Array, "2"]) -> Float[Array, ""]:
     """Signed distance from ``x`` to the outline: positive outside, negative inside,
-    in the units of the outline's points.  Differentiable in ``x`` and in the field."""
+    in the units of the outline's points.  Differentiable in ``x`` and in the field.
+
+    The closest parameter is searched without gradient, then one Newton step is
+    taken *with* gradient: its value is unchanged at convergence, and its derivative
+    is the implicit-function-theorem derivative of the closest point, so first and
+    second derivatives of the distance (curvature included) are right: needed by
+    implicit differentiation through an optimum, which uses the Hessian."""
     t = closest_parameter(field, x)
+    c, dc, ddc = curve(field, t)
+    r = x - c
+    h = jnp.maximum(dc @ dc - r @ ddc, 0.25 * (dc @ dc))
+    t = t + (r @ dc) / h
     c, dc, _ = curve(field, t)
     n = jnp.stack([dc[1], -dc[0]]) / jnp.linalg.norm(dc)
     return (x - c) @ n

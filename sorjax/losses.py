@@ -36,7 +36,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from ._bundle import BundleProblem, _SOLVER, chart, pack_intrinsics, residuals, unpack_intrinsics
+from ._bundle import BundleProblem, chart, pack_intrinsics, residuals, unpack_intrinsics
 from ._camera import normalising_transform, omega_matrix, omega_vector_from_intrinsics
 from ._field import DistanceField, curve_points, sample_weights, signed_distance, signed_distances
 from ._field import make_field as _make_field
@@ -85,6 +85,9 @@ def bundle_residuals(
     return jax.vmap(symmetry_residuals)(v_x, l, samples, fields)
 
 
+_TIGHT = optx.LevenbergMarquardt(rtol=1e-11, atol=1e-13)
+
+
 def calibrated_intrinsics(points: Float[Array, "V M 2"], calibration, n_samples: int = 100) -> Float[Array, "4"]:
     """``(fu, fv, u0, v0)`` in pixels from re-solving the bundle on ``points``
     (V outlines, M evenly spaced pixel points each, e.g. the ``make_outline`` points the
@@ -107,7 +110,7 @@ def calibrated_intrinsics(points: Float[Array, "V M 2"], calibration, n_samples:
     Kn = T @ np.asarray(calibration.K)
     k0 = pack_intrinsics(*(jnp.asarray(x) for x in (Kn[0, 0], Kn[1, 1], Kn[0, 2], Kn[1, 2])), a is None)
     sol = optx.least_squares(
-        residuals, _SOLVER, (k0, jnp.zeros((len(v0), 2))), args=problem, max_steps=200, throw=False,
+        residuals, _TIGHT, (k0, jnp.zeros((len(v0), 2))), args=problem, max_steps=200, throw=False,
         adjoint=optx.ImplicitAdjoint(),
     )
     fu, fv, u0, v0_ = unpack_intrinsics(sol.value[0], problem.aspect)

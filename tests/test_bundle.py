@@ -1,0 +1,104 @@
+"""The joint bundle: residuals, jit/vmap, implicit gradients, the predicted error."""
+
+import subprocess
+import sys
+import textwrap
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import sorjax
+from sorjax import losses, scenes
+from sorjax._bundle import BundleProblem, chart, pack_intrinsics, residuals, solve
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return scenes.two_spheres(f=700.0)
+
+
+def problem_at_truth(sc, outlines, n_points=256, n_samples=50):
+    """A bundle problem in pixels (no normalisation) with the chart at the true v_x."""
+    pts = jnp.stack([sorjax.make_outline(o, n_points).points for o in outlines])
+    fields = jax.vmap(losses.distance_field)(pts)
+    samples = jax.vmap(lambda f: losses.outline_samples(f, n_samples))(fields)
+    weights = jax.vmap(lambda f: losses.sample_weights(f, n_samples))(fields)
+    v0, E = chart(np.stack([v.v_x for v in sc.views]))
+    prob = BundleProblem(fields, samples, weights, jnp.asarray(v0), jnp.asarray(E), jnp.asarray(jnp.nan), jnp.asarray(1.0))
+    K = sc.K
+    k0 = pack_intrinsics(*(jnp.asarray(x) for x in (K[0, 0], K[1, 1], K[0, 2], K[1, 2])), True)
+    return prob, (k0, jnp.zeros((len(outlines), 2)))
+
+
+def test_bundle_residuals_vanish_at_truth_and_match_public_loss(scene):
+    prob, y = problem_at_truth(scene, scene.outlines)
+    r = residuals(y, prob)
+    assert float(jnp.max(jnp.abs(r))) < 1e-2  # 256 knots: resolution-limited
+    K = scene.K
+    vx = jnp.stack([jnp.asarray(v.v_x) for v in scene.views])
+    pub = losses.bundle_residuals(jnp.asarray([K[0, 0], K[1, 1], K[0, 2], K[1, 2]]), vx, prob.samples, prob.fields)
+    np.testing.assert_allclose(np.asarray(pub * prob.weights).reshape(-1), np.asarray(r), atol=1e-9)
+    # the bundle's axes are the pole-polar l_s = omega v_x: the true ones
+    np.testing.assert_allclose(float(jax.jit(residuals)(y, prob) @ r), float(r @ r), rtol=1e-10)
+
+
+def test_solve_vmapped_over_trials_matches_loop(scene):
+    trials = []
+    for t in range(2):
+        outs = [scenes.paper_noise(o, 1.0, 100 + 10 * t + i) for i, o in enumerate(scene.outlines)]
+        trials.append(problem_at_truth(scene, outs))
+    probs = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *[p for p, _ in trials])
+    y0s = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *[y for _, y in trials])
+    batched = jax.vmap(lambda y, p: solve(y, p, max_steps=100))(y0s, probs)
+    for t, (p, y0) in enumerate(trials):
+        single = solve(y0, p, max_steps=100)
+        np.testing.assert_allclose(np.asarray(batched[0][0][t]), np.asarray(single[0][0]), rtol=1e-6, atol=1e-8)
+        f_est = float(jnp.exp(single[0][0][1]))
+        assert abs(f_est - 700.0) / 700.0 < 0.1
+
+
+def test_implicit_gradient_of_intrinsics_matches_finite_differences(scene):
+    outs = [scenes.paper_noise(o, 0.5, 7 + i) for i, o in enumerate(scene.outlines)]
+    cal = sorjax.calibrate(outs, n_points=256)
+    P = jnp.stack([sorjax.make_outline(o, 256).points for o in outs])
+    k = losses.calibrated_intrinsics(P, cal)
+    np.testing.assert_allclose(np.asarray(k), [cal.fu, cal.fv, cal.u0, cal.v0], rtol=1e-5)
+    g = jax.grad(lambda p: losses.calibrated_intrinsics(p, cal)[1])(P)
+    d = jnp.asarray(np.random.default_rng(0).normal(size=P.shape))
+    h = 1e-3
+    fd = (losses.calibrated_intrinsics(P + h * d, cal)[1] - losses.calibrated_intrinsics(P - h * d, cal)[1]) / (2 * h)
+    np.testing.assert_allclose(float(jnp.sum(g * d)), float(fd), rtol=2e-3)
+
+
+def test_predicted_error_properties(scene):
+    p1 = sorjax.predicted_error(scene, 1.0, aspect_ratio=1.0, n_points=256, n_samples=50)
+    p2 = sorjax.predicted_error(scene, 2.0, aspect_ratio=1.0, n_points=256, n_samples=50)
+    s1, b1 = p1.percent("bundle"), p1.percent("bound")
+    assert np.all(s1 > 0) and np.all(np.isfinite(s1))
+    assert np.all(b1 <= s1 * (1 + 1e-9))  # the bound is a bound
+    np.testing.assert_allclose(p2.percent("bundle"), 2 * s1, rtol=1e-9)  # linear in sigma
+    assert 0.2 < s1[1] < 10  # percent of f at sigma = 1 px: a sane magnitude
+    np.testing.assert_allclose(s1[0], s1[1], rtol=1e-12)  # unit aspect: fu = fv
+
+
+def test_losses_import_and_differentiate_in_fresh_session():
+    code = textwrap.dedent(
+        """
+        import jax, jax.numpy as jnp, numpy as np
+        import sorjax
+        from sorjax import losses, scenes
+        sc = scenes.two_spheres(f=700.0)
+        pts = sorjax.make_outline(sc.outlines[0], 256).points
+        field = losses.distance_field(pts)
+        x = losses.outline_samples(field, 40)
+        v, l = jnp.asarray(sc.views[0].v_x), jnp.asarray(sc.views[0].l_s) + jnp.array([0, 0, 1.0])
+        g = jax.grad(lambda v: jnp.sum(losses.symmetry_residuals(v, l, x, field) ** 2))(v)
+        assert g.dtype == jnp.float64 and bool(jnp.all(jnp.isfinite(g))) and float(jnp.abs(g).max()) > 0
+        print("ok")
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().endswith("ok")
