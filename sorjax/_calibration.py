@@ -38,6 +38,10 @@ class RESULTS(eqx.Enumeration):
         "The bundle adjustment did not converge. The outlines may not be surfaces of "
         "revolution, or the views may not determine the camera; inspect view_rms."
     )
+    too_few_views = (
+        "Fewer than two views carry calibration information (conic outlines were dropped). "
+        "Add views of surfaces of revolution whose profile is visible, from other positions."
+    )
     degenerate = (
         "The views do not determine the intrinsics with this method (e.g. fewer than two "
         "views with a finite vanishing point, or parallel constraint lines). Add views "
@@ -70,6 +74,8 @@ class Calibration(eqx.Module):
         method: "I", "IIa", "IIb" or "bundle".
         aspect_ratio: the known ``fu / fv`` imposed, or None when it was estimated
             (always 1 for "I"/"IIb" without one).
+        used: indices of the views used (conic outlines are dropped with a warning);
+            ``view_rms``, ``v_x`` and ``l_s`` refer to these views, ``homologies`` to all.
     """
 
     K: Float[Array, "3 3"]
@@ -84,6 +90,7 @@ class Calibration(eqx.Module):
     l_s: Float[Array, "V 3"]
     method: str = eqx.field(static=True)
     aspect_ratio: float | None = eqx.field(static=True, default=None)
+    used: tuple[int, ...] = eqx.field(static=True, default=())
 
     @property
     def std(self) -> np.ndarray:
@@ -116,6 +123,12 @@ class Calibration(eqx.Module):
 
     def __array__(self, dtype=None, copy=None):
         return np.asarray(self.K, dtype=dtype)
+
+
+_FIELDS = (
+    "K", "omega", "homologies", "result", "covariance", "cost", "view_rms", "steps", "v_x", "l_s",
+    "method", "aspect_ratio", "used",
+)
 
 
 def _check_method(method: str, aspect_ratio):
@@ -266,18 +279,46 @@ def calibrate(
     for i, h in enumerate(homologies):
         if not bool(h.converged):
             warnings.warn(f"view {i}: the homology fit did not converge (rms {float(h.rms):.3g} px).", stacklevel=2)
-    T = normalising_transform(np.concatenate([np.asarray(o.points) for o in outs]))
-    if method == "bundle":
-        cal = _bundle_calibration(outs, tuple(homologies), T, aspect_ratio, n_samples)
-    else:
-        K, omega, code = linear_calibration(homologies, method, T, aspect_ratio)
-        nan = jnp.full((4, 4), jnp.nan)
-        rms = jnp.stack([h.rms for h in homologies])
-        vx = jnp.stack([h.v_x for h in homologies])
-        ls = jnp.stack([h.l_s for h in homologies])
-        a = None if method == "IIa" else (1.0 if aspect_ratio is None else float(aspect_ratio))
+    used = []
+    for i, h in enumerate(homologies):
+        if h.is_conic:
+            warnings.warn(
+                f"view {i}: the outline is a conic to within {float(h.conic_rms):.2g} px (its symmetry "
+                f"residual is {float(h.rms):.2g} px), like a sphere or a bowl seen from above showing "
+                "only its rim: infinitely many homologies fit it, so it carries no calibration "
+                "information (paper, Section 6). Dropped; use views where the body's profile shows.",
+                stacklevel=2,
+            )
+        else:
+            used.append(i)
+    homologies = tuple(homologies)
+    a = None if method in ("IIa",) or (method == "bundle" and aspect_ratio is None) else (
+        1.0 if aspect_ratio is None else float(aspect_ratio)
+    )
+    if len(used) < 2:
+        nan3, nan4 = jnp.full((3, 3), jnp.nan), jnp.full((4, 4), jnp.nan)
         cal = Calibration(
-            K, omega, tuple(homologies), code, nan, jnp.asarray(jnp.nan), rms, jnp.asarray(0), vx, ls, method, a
+            nan3, nan3, homologies, RESULTS.too_few_views, nan4, jnp.asarray(jnp.nan),
+            jnp.zeros((0,)), jnp.asarray(0), jnp.zeros((0, 3)), jnp.zeros((0, 3)), method, a, tuple(used),
+        )
+        if throw:
+            raise CalibrationError(cal.message)
+        return cal
+    outs_u = [outs[i] for i in used]
+    homs_u = tuple(homologies[i] for i in used)
+    T = normalising_transform(np.concatenate([np.asarray(o.points) for o in outs_u]))
+    if method == "bundle":
+        cal = _bundle_calibration(outs_u, homs_u, T, aspect_ratio, n_samples)
+        cal = eqx.tree_at(lambda c: c.homologies, cal, homologies)
+        cal = Calibration(*[getattr(cal, f) for f in _FIELDS[:-1]], tuple(used))
+    else:
+        K, omega, code = linear_calibration(homs_u, method, T, aspect_ratio)
+        nan = jnp.full((4, 4), jnp.nan)
+        rms = jnp.stack([h.rms for h in homs_u])
+        vx = jnp.stack([h.v_x for h in homs_u])
+        ls = jnp.stack([h.l_s for h in homs_u])
+        cal = Calibration(
+            K, omega, homologies, code, nan, jnp.asarray(jnp.nan), rms, jnp.asarray(0), vx, ls, method, a, tuple(used)
         )
     if throw and not cal.success:
         raise CalibrationError(cal.message)

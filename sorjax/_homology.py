@@ -31,6 +31,8 @@ Initialisation is automatic (the paper picked bitangents by hand):
   ``l_b x l_b'`` and ``(x1 x x2') x (x1' x x2)`` (paper, Section 5.1);
 * a symmetry-axis search: mirror symmetries (``v`` at infinity orthogonal to ``l``)
   over a grid of axis directions and offsets, the best few local minima kept;
+* for a nearly conic outline (a bowl from above), the pole-polar pairs of its
+  best-fitting conic, each an exact symmetry of the conic;
 
 every candidate is refined by Levenberg-Marquardt (optimistix) and the one with the
 lowest cost wins.
@@ -52,6 +54,8 @@ from ._field import DistanceField, curve_points, make_field, sample_weights, sig
 from ._outline import DEFAULT_POINTS, Outline, make_outline
 
 DEFAULT_SAMPLES = 100
+CONIC_RATIO = 1.5
+CONIC_FLOOR_PX = 1e-3
 _GRID_DIRECTIONS = 48
 _GRID_OFFSETS = (-0.3, -0.15, 0.0, 0.15, 0.3)
 
@@ -68,6 +72,10 @@ class Homology(eqx.Module):
         cost: eq. 20's cost in px^2.
         converged: the optimiser reported success.
         steps: Levenberg-Marquardt steps taken.
+        conic_rms: RMS distance (px, Sampson) of the outline from its best-fitting
+            conic.  A conic outline (a sphere, or a bowl seen from above showing only
+            its rim) is symmetric under infinitely many homologies and carries no
+            calibration information (the paper's Section 6): see :attr:`is_conic`.
     """
 
     l_s: Float[Array, "3"]
@@ -77,6 +85,14 @@ class Homology(eqx.Module):
     cost: Float[Array, ""]
     converged: Bool[Array, ""]
     steps: Int[Array, ""]
+    conic_rms: Float[Array, ""]
+
+    @property
+    def is_conic(self) -> bool:
+        """The outline is explained by a conic about as well as by this homology
+        (``conic_rms <= CONIC_RATIO * rms + CONIC_FLOOR_PX``): its homology is not
+        determined, so the view says nothing about the camera."""
+        return bool(self.conic_rms <= CONIC_RATIO * self.rms + CONIC_FLOOR_PX)
 
 
 # ---------------------------------------------------------------------------- maths
@@ -308,7 +324,49 @@ def _refine_candidates(field, samples, weights, cands, max_steps: int = 100):
     return out[0], out[1], float(out[2]), out[3], out[4] + steps0
 
 
-def _to_pixels(T: np.ndarray, v, l, cost, ok, steps, scale, n_samples) -> Homology:
+def fit_conic(points_n: np.ndarray):
+    """Algebraic least-squares conic of points (normalised coordinates): the SVD null
+    vector of ``[x^2, xy, y^2, x, y, 1]``.  Returns ``(C, rms)``: the symmetric 3x3
+    conic and the RMS Sampson distance of the points from it (points' units)."""
+    x, y = points_n[:, 0], points_n[:, 1]
+    D = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], 1)
+    a, b, c, d, e, f = np.linalg.svd(D, full_matrices=False)[2][-1]
+    val = D @ np.array([a, b, c, d, e, f])
+    gx, gy = 2 * a * x + b * y + d, b * x + 2 * c * y + e
+    rms = float(np.sqrt(np.mean(val**2 / np.maximum(gx**2 + gy**2, 1e-300))))
+    return np.array([[a, b / 2, d / 2], [b / 2, c, e / 2], [d / 2, e / 2, f]]), rms
+
+
+def conic_rms(points_n: np.ndarray) -> float:
+    """RMS Sampson distance of points from their least-squares conic (:func:`fit_conic`)."""
+    return fit_conic(points_n)[1]
+
+
+NEAR_CONIC = 0.05  # normalised units (the outline's RMS radius is sqrt 2)
+
+
+def conic_candidates(points_n: np.ndarray, n_dir: int = 12):
+    """For a nearly conic outline (a bowl seen from above): every line ``l`` through
+    the conic's centre with its pole ``v = C^-1 l`` is an exact homology of the conic;
+    the outline's departure from the conic picks the right one, so these are starts."""
+    C, rms = fit_conic(points_n)
+    if rms > NEAR_CONIC:
+        return []
+    try:
+        Ci = np.linalg.inv(C)
+    except np.linalg.LinAlgError:
+        return []
+    centre = Ci[:, 2] / Ci[2, 2] if abs(Ci[2, 2]) > 1e-12 else np.array([0.0, 0.0, 1.0])
+    out = []
+    for t in np.linspace(0.0, np.pi, n_dir, endpoint=False):
+        l = np.array([np.cos(t), np.sin(t), -(np.cos(t) * centre[0] + np.sin(t) * centre[1])])
+        v = Ci @ l
+        if np.linalg.norm(v) > 0 and abs(v @ l) > 1e-9 * np.linalg.norm(v) * np.linalg.norm(l):
+            out.append((v, l))
+    return out
+
+
+def _to_pixels(T: np.ndarray, v, l, cost, ok, steps, scale, n_samples, conic) -> Homology:
     v_pix = np.linalg.solve(T, np.asarray(v))
     v_pix = v_pix / np.linalg.norm(v_pix)
     l_pix = T.T @ np.asarray(l)
@@ -323,6 +381,7 @@ def _to_pixels(T: np.ndarray, v, l, cost, ok, steps, scale, n_samples) -> Homolo
         cost=cost_px,
         converged=jnp.asarray(ok),
         steps=jnp.asarray(steps),
+        conic_rms=jnp.asarray(conic * scale),
     )
 
 
@@ -364,6 +423,6 @@ def fit_homology(
         v0, l0 = (np.asarray(a, dtype=np.float64) for a in init)
         cands = [(T @ v0, np.linalg.solve(T.T, l0))]
     else:
-        cands = bitangent_candidates(pn) + mirror_candidates(pn, samples)
+        cands = bitangent_candidates(pn) + mirror_candidates(pn, samples) + conic_candidates(pn)
     v, l, cost, ok, steps = _refine_candidates(field, samples, weights, cands, max_steps=max_steps)
-    return _to_pixels(T, v, l, cost, ok, steps, scale, float(jnp.sum(weights)))
+    return _to_pixels(T, v, l, cost, ok, steps, scale, float(jnp.sum(weights)), conic_rms(pn))

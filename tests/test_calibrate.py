@@ -92,3 +92,21 @@ def test_single_view_and_bad_points(spheres):
         sorjax.calibrate(sc.outlines, method="IIb", aspect_ratio=-1.0)
     with pytest.raises(ValueError, match="IIa"):
         sorjax.calibrate(sc.outlines, method="IIa", aspect_ratio=1.1)
+
+
+def test_conic_views_are_dropped_with_a_reason(spheres):
+    sc, homs = spheres
+    t = np.linspace(0, 2 * np.pi, 800, endpoint=False)
+    ellipse = np.stack([300 + 90 * np.cos(t + 0.3), 200 + 60 * np.sin(t)], 1)  # a sphere's outline
+    h = sorjax.fit_homology(ellipse)
+    assert h.is_conic and float(h.conic_rms) < 1e-3
+    assert not homs[0].is_conic and float(homs[0].conic_rms) > 1.0
+    with pytest.warns(UserWarning, match="view 1: the outline is a conic"):
+        cal = sorjax.calibrate([sc.outlines[0], ellipse, sc.outlines[1], sc.outlines[2]], method="IIb")
+    assert cal.used == (0, 2, 3) and cal.success
+    assert rel_err(cal, sc.K).max() < 1e-4
+    with pytest.warns(UserWarning, match="conic"):
+        few = sorjax.calibrate([sc.outlines[0], ellipse])
+    assert not few.success and "Fewer than two views" in few.message and np.isnan(few.fu)
+    with pytest.raises(sorjax.CalibrationError), pytest.warns(UserWarning):
+        sorjax.calibrate([sc.outlines[0], ellipse], throw=True)
