@@ -35,6 +35,7 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from ._camera import omega_matrix, omega_vector_from_intrinsics
+from ._camera import pixel_intrinsics as _pixel_intrinsics
 from ._field import DistanceField, curve_points, make_field, sample_weights
 from ._homology import _tangent_basis, symmetry_residuals
 
@@ -107,13 +108,7 @@ def covariance(y, problem: BundleProblem, T):
     s2 = jnp.sum(r**2) / dof
     cov_y = s2 * jnp.linalg.pinv(J.T @ J)
 
-    def pixel_intrinsics(f):
-        fu, fv, u0, v0 = unpack_intrinsics(unravel(f)[0], problem.aspect)
-        # K = T^-1 K_n with T the isotropic similarity x_n = (x - c) / s
-        s, cx, cy = 1.0 / T[0, 0], -T[0, 2] / T[0, 0], -T[1, 2] / T[1, 1]
-        return jnp.stack([fu * s, fv * s, u0 * s + cx, v0 * s + cy])
-
-    G = jax.jacfwd(pixel_intrinsics)(flat)
+    G = jax.jacfwd(lambda f: _pixel_intrinsics(T, *unpack_intrinsics(unravel(f)[0], problem.aspect)))(flat)
     return G @ cov_y @ G.T, s2
 
 

@@ -100,6 +100,13 @@ def normalising_transform(points: np.ndarray) -> np.ndarray:
     return np.array([[1 / s, 0, -c[0] / s], [0, 1 / s, -c[1] / s], [0, 0, 1.0]])
 
 
+def pixel_intrinsics(T, fu, fv, u0, v0) -> Float[Array, "4"]:
+    """``(fu, fv, u0, v0)`` in pixels from intrinsics in the coordinates ``x_n = T x``
+    of an isotropic similarity ``T``: ``K = T^-1 K_n`` (differentiable)."""
+    s = 1.0 / T[0, 0]
+    return jnp.stack([fu * s, fv * s, (u0 - T[0, 2]) * s, (v0 - T[1, 2]) * s])
+
+
 def transform_points(T, x: Float[Array, "... 2"]) -> Float[Array, "... 2"]:
     """Apply a similarity/affine ``T`` (3x3 with last row (0,0,1)) to inhomogeneous points."""
     T = jnp.asarray(T)

@@ -31,7 +31,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._bundle import BundleProblem, chart, pack_intrinsics, residuals, unpack_intrinsics
-from ._camera import normalising_transform
+from ._camera import normalising_transform, pixel_intrinsics
 from ._field import curve, curve_points, make_field, sample_weights
 from ._outline import DEFAULT_POINTS, make_outline
 
@@ -131,9 +131,5 @@ def predicted_error(
     w_inv = np.where(w > 1e-10 * w.max(), 1.0 / np.maximum(w, 1e-300), 0.0)
     C_gls = np.linalg.inv(J.T @ (U * w_inv) @ U.T @ J)
 
-    def pixel_intrinsics(flat):
-        fu, fv, u0, v0_ = unpack_intrinsics(unravel(flat)[0], aspect)
-        return jnp.stack([fu * s, fv * s, (u0 - T[0, 2]) * s, (v0_ - T[1, 2]) * s])
-
-    G = np.asarray(jax.jacfwd(pixel_intrinsics)(flat0))
+    G = np.asarray(jax.jacfwd(lambda f: pixel_intrinsics(T, *unpack_intrinsics(unravel(f)[0], aspect)))(flat0))
     return ErrorPrediction(jnp.asarray(G @ C_ols @ G.T), jnp.asarray(G @ C_gls @ G.T), float(K[1, 1]))

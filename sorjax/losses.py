@@ -37,7 +37,7 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from ._bundle import BundleProblem, chart, pack_intrinsics, residuals, unpack_intrinsics
-from ._camera import normalising_transform, omega_matrix, omega_vector_from_intrinsics
+from ._camera import normalising_transform, omega_matrix, omega_vector_from_intrinsics, pixel_intrinsics
 from ._field import DistanceField, curve_points, sample_weights, signed_distance, signed_distances
 from ._field import make_field as _make_field
 from ._homology import homology_matrix, symmetry_residuals, transfer
@@ -113,6 +113,4 @@ def calibrated_intrinsics(points: Float[Array, "V M 2"], calibration, n_samples:
         residuals, _TIGHT, (k0, jnp.zeros((len(v0), 2))), args=problem, max_steps=200, throw=False,
         adjoint=optx.ImplicitAdjoint(),
     )
-    fu, fv, u0, v0_ = unpack_intrinsics(sol.value[0], problem.aspect)
-    s = 1.0 / T[0, 0]
-    return jnp.stack([fu * s, fv * s, (u0 - T[0, 2]) * s, (v0_ - T[1, 2]) * s])
+    return pixel_intrinsics(T, *unpack_intrinsics(sol.value[0], problem.aspect))
