@@ -201,17 +201,24 @@ def linear_calibration(homologies, method: str, T: np.ndarray, aspect_ratio=None
 
 
 def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples) -> Calibration:
-    """Seed the 2V+4 (or 2V+3) bundle with the linear methods and solve it."""
+    """Seed the 2V+4 (or 2V+3) bundle with every linear method that succeeds (IIa,
+    IIb and I; with a known aspect ratio their estimates are projected onto it) and
+    keep the solution of lowest cost: one linear seed can be far off when a view is
+    weak.  With no positive-definite linear seed, a spread of plausible cameras."""
     scale = 1.0 / T[0, 0]
+    a = 1.0 if aspect_ratio is None else float(aspect_ratio)
     seeds = []
-    methods = ("IIa", "IIb") if aspect_ratio is None else ("IIb",)
-    for m in methods:
-        K, _, code = linear_calibration(homologies, m, T, aspect_ratio)
+    for m in ("IIa", "IIb", "I"):
+        K, _, code = linear_calibration(homologies, m, T, None if m == "IIa" else a)
         if bool(code == RESULTS.successful):
             Kn = T @ np.asarray(K)
-            seeds.append((Kn[0, 0], Kn[1, 1], Kn[0, 2], Kn[1, 2]))
-    if not seeds:  # no positive-definite linear seed: a spread of plausible cameras
-        a = 1.0 if aspect_ratio is None else float(aspect_ratio)
+            fu, fv = Kn[0, 0], Kn[1, 1]
+            if aspect_ratio is not None:
+                fv = np.sqrt(fu * fv / a)
+                fu = a * fv
+            if np.all(np.isfinite([fu, fv, Kn[0, 2], Kn[1, 2]])) and fu > 0 and fv > 0:
+                seeds.append((fu, fv, Kn[0, 2], Kn[1, 2]))
+    if not seeds:
         seeds = [(a * f, f, 0.0, 0.0) for f in (2.0, 5.0, 12.0)]
     pts_n = np.stack([np.asarray(o.points) @ T[:2, :2].T + T[:2, 2] for o in outs])
     v_n = np.stack([T @ np.asarray(h.v_x) for h in homologies])
