@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-DEFAULT_POINTS = 1024
+DEFAULT_POINTS = 2048
 MIN_POINTS = 10
 
 
