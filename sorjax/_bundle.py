@@ -44,7 +44,7 @@ class BundleProblem(eqx.Module):
     """Everything the bundle's residuals need besides its parameters (normalised
     coordinates): per-view fields (stacked pytree), samples (V, N, 2), the vertices'
     chart centres ``v0`` (V, 3) and tangent bases ``E`` (V, 3, 2), the known aspect
-    ratio (NaN for free aspect) and the pixel scale (pixels per normalised unit)."""
+    ratio (NaN for free aspect)."""
 
     fields: DistanceField
     samples: Float[Array, "V N 2"]
@@ -52,7 +52,6 @@ class BundleProblem(eqx.Module):
     v0: Float[Array, "V 3"]
     E: Float[Array, "V 3 2"]
     aspect: Float[Array, ""]
-    scale: Float[Array, ""]
 
 
 def unpack_intrinsics(k, aspect):
@@ -138,7 +137,6 @@ def fit_bundle(points_n, v_seeds_n, intrinsic_seeds, aspect, n_samples: int, max
         v0=jnp.asarray(v0),
         E=jnp.asarray(E),
         aspect=jnp.asarray(np.nan if aspect is None else float(aspect)),
-        scale=jnp.asarray(1.0),
     )
     best = None
     d0 = jnp.zeros((len(v0), 2))

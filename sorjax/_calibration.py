@@ -125,12 +125,6 @@ class Calibration(eqx.Module):
         return np.asarray(self.K, dtype=dtype)
 
 
-_FIELDS = (
-    "K", "omega", "homologies", "result", "covariance", "cost", "view_rms", "steps", "v_x", "l_s",
-    "method", "aspect_ratio", "used",
-)
-
-
 def _check_method(method: str, aspect_ratio):
     if method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(map(repr, METHODS))}; got {method!r}.")
@@ -200,7 +194,7 @@ def linear_calibration(homologies, method: str, T: np.ndarray, aspect_ratio=None
     return K, omega, code
 
 
-def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples) -> Calibration:
+def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples, all_homologies, used) -> Calibration:
     """Seed the 2V+4 (or 2V+3) bundle with every linear method that succeeds (IIa,
     IIb and I; with a known aspect ratio their estimates are projected onto it) and
     keep the solution of lowest cost: one linear seed can be far off when a view is
@@ -239,7 +233,7 @@ def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples) -> Calibra
     ls = vx @ omega
     ls = ls / jnp.linalg.norm(ls[:, :2], axis=1, keepdims=True)
     a = None if aspect_ratio is None else float(aspect_ratio)
-    return Calibration(K, omega, homologies, code, cov, cost, view_rms, steps, vx, ls, "bundle", a)
+    return Calibration(K, omega, all_homologies, code, cov, cost, view_rms, steps, vx, ls, "bundle", a, used)
 
 
 def calibrate(
@@ -315,9 +309,7 @@ def calibrate(
     homs_u = tuple(homologies[i] for i in used)
     T = normalising_transform(np.concatenate([np.asarray(o.points) for o in outs_u]))
     if method == "bundle":
-        cal = _bundle_calibration(outs_u, homs_u, T, aspect_ratio, n_samples)
-        cal = eqx.tree_at(lambda c: c.homologies, cal, homologies)
-        cal = Calibration(*[getattr(cal, f) for f in _FIELDS[:-1]], tuple(used))
+        cal = _bundle_calibration(outs_u, homs_u, T, aspect_ratio, n_samples, homologies, tuple(used))
     else:
         K, omega, code = linear_calibration(homs_u, method, T, aspect_ratio)
         nan = jnp.full((4, 4), jnp.nan)

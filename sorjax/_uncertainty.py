@@ -107,7 +107,7 @@ def predicted_error(
         p = jnp.asarray(pn) + n[..., None] * jnp.asarray(normals)
         fields = jax.vmap(make_field)(p)
         samples = jax.vmap(lambda f: curve_points(f, n_samples))(fields)
-        prob = BundleProblem(fields, samples, weights, jnp.asarray(v0), jnp.asarray(E), aspect, jnp.asarray(1.0))
+        prob = BundleProblem(fields, samples, weights, jnp.asarray(v0), jnp.asarray(E), aspect)
         return residuals(unravel(flat), prob)
 
     n0 = jnp.zeros((V, M))

@@ -105,7 +105,7 @@ def calibrated_intrinsics(points: Float[Array, "V M 2"], calibration, n_samples:
     weights = jax.vmap(lambda f: sample_weights(f, n_samples))(fields)
     a = calibration.aspect_ratio
     problem = BundleProblem(
-        fields, samples, weights, jnp.asarray(v0), jnp.asarray(E), jnp.asarray(np.nan if a is None else a), jnp.asarray(1.0)
+        fields, samples, weights, jnp.asarray(v0), jnp.asarray(E), jnp.asarray(np.nan if a is None else a)
     )
     Kn = T @ np.asarray(calibration.K)
     k0 = pack_intrinsics(*(jnp.asarray(x) for x in (Kn[0, 0], Kn[1, 1], Kn[0, 2], Kn[1, 2])), a is None)

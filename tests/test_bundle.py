@@ -26,7 +26,7 @@ def problem_at_truth(sc, outlines, n_points=256, n_samples=50):
     samples = jax.vmap(lambda f: losses.outline_samples(f, n_samples))(fields)
     weights = jax.vmap(lambda f: losses.sample_weights(f, n_samples))(fields)
     v0, E = chart(np.stack([v.v_x for v in sc.views]))
-    prob = BundleProblem(fields, samples, weights, jnp.asarray(v0), jnp.asarray(E), jnp.asarray(jnp.nan), jnp.asarray(1.0))
+    prob = BundleProblem(fields, samples, weights, jnp.asarray(v0), jnp.asarray(E), jnp.asarray(jnp.nan))
     K = sc.K
     k0 = pack_intrinsics(*(jnp.asarray(x) for x in (K[0, 0], K[1, 1], K[0, 2], K[1, 2])), True)
     return prob, (k0, jnp.zeros((len(outlines), 2)))
