@@ -23,6 +23,8 @@ delta / (2 sqrt(pi) smooth_px) * exp(-(s - s')^2 / (4 smooth_px^2))`` for arc le
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.flatten_util
@@ -61,6 +63,39 @@ def _noise_covariance(arc: np.ndarray, perimeter: float, sigma: float, model: st
     return c0 * np.exp(-(d**2) / (4.0 * smooth_px**2))
 
 
+@functools.partial(jax.jit, static_argnames=("n_samples",))
+def _jacobians(y0, pn, normals, weights, v0, E, aspect, n_samples: int):
+    """Jacobians of the stacked residuals at ``y0`` in the parameters (``J``) and in
+    the normal displacements of the outline points (``B``), one compiled program."""
+    flat0, unravel = jax.flatten_util.ravel_pytree(y0)
+
+    def R(flat, n):
+        p = pn + n[..., None] * normals
+        fields = jax.vmap(make_field)(p)
+        samples = jax.vmap(lambda f: curve_points(f, n_samples))(fields)
+        prob = BundleProblem(fields, samples, weights, v0, E, aspect)
+        return residuals(unravel(flat), prob)
+
+    n0 = jnp.zeros(pn.shape[:2])
+    return jax.jacfwd(R, argnums=0)(flat0, n0), jax.jacrev(R, argnums=1)(flat0, n0)
+
+
+@functools.partial(jax.jit, static_argnames=("n_samples",))
+def _geometry(pn, n_samples: int):
+    """Unit tangents at the knots and the sample weights of each view's field."""
+    fields = jax.vmap(make_field)(pn)
+    m = pn.shape[1]
+    tangents = jax.vmap(lambda f: jax.vmap(lambda t: curve(f, t)[1])(jnp.arange(m, dtype=jnp.float64)))(fields)
+    return tangents, jax.vmap(lambda f: sample_weights(f, n_samples))(fields)
+
+
+@jax.jit
+def _intrinsics_jacobian(y0, T, aspect):
+    """Jacobian of the pixel intrinsics ``(fu, fv, u0, v0)`` in the flat parameters."""
+    flat0, unravel = jax.flatten_util.ravel_pytree(y0)
+    return jax.jacfwd(lambda f: pixel_intrinsics(T, *unpack_intrinsics(unravel(f)[0], aspect)))(flat0)
+
+
 def predicted_error(
     scene,
     sigma: float,
@@ -86,12 +121,10 @@ def predicted_error(
     T = normalising_transform(pts.reshape(-1, 2))
     s = 1.0 / T[0, 0]
     pn = pts @ T[:2, :2].T + T[:2, 2]
-    fields0 = jax.vmap(make_field)(jnp.asarray(pn))
-    tangents = jax.vmap(lambda f: jax.vmap(lambda t: curve(f, t)[1])(jnp.arange(M, dtype=jnp.float64)))(fields0)
+    tangents, weights = _geometry(jnp.asarray(pn), n_samples)
     tangents = np.asarray(tangents)
     normals = np.stack([tangents[..., 1], -tangents[..., 0]], -1)
     normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
-    weights = jax.vmap(lambda f: sample_weights(f, n_samples))(fields0)
 
     K = np.asarray(scene.K)
     Kn = T @ K
@@ -100,36 +133,29 @@ def predicted_error(
     v_n = np.stack([T @ np.asarray(v.v_x) for v in scene.views])
     v0, E = chart(v_n)
     y0 = (k0, jnp.zeros((V, 2)))
-    flat0, unravel = jax.flatten_util.ravel_pytree(y0)
     aspect = jnp.asarray(np.nan if free else float(aspect_ratio))
 
-    def R(flat, n):
-        p = jnp.asarray(pn) + n[..., None] * jnp.asarray(normals)
-        fields = jax.vmap(make_field)(p)
-        samples = jax.vmap(lambda f: curve_points(f, n_samples))(fields)
-        prob = BundleProblem(fields, samples, weights, jnp.asarray(v0), jnp.asarray(E), aspect)
-        return residuals(unravel(flat), prob)
-
-    n0 = jnp.zeros((V, M))
-    J = np.asarray(jax.jacfwd(R, argnums=0)(flat0, n0))
-    B = np.asarray(jax.jacrev(R, argnums=1)(flat0, n0)).reshape(J.shape[0], V * M)
+    J, B = _jacobians(y0, jnp.asarray(pn), jnp.asarray(normals), weights, jnp.asarray(v0), jnp.asarray(E), aspect,
+                      n_samples)
+    J, B = np.asarray(J), np.asarray(B).reshape(J.shape[0], V * M)
     keep = np.asarray(weights).reshape(-1) > 0
     J, B = J[keep], B[keep]
 
-    # noise covariance per view (px^2 -> normalised units^2), views independent
+    # noise covariance per view (px^2 -> normalised units^2), views independent:
+    # Sigma_r = sum_j B_j C_j B_j^T
     seg = np.linalg.norm(np.roll(pts, -1, axis=1) - pts, axis=-1)
-    Sn = np.zeros((V * M, V * M))
+    Sr = np.zeros((B.shape[0], B.shape[0]))
     for j in range(V):
         arc = np.concatenate([[0.0], np.cumsum(seg[j][:-1])])
         per = float(seg[j].sum())
         C = _noise_covariance(arc, per, sigma, noise, smooth_px, preserve_std)
-        Sn[j * M : (j + 1) * M, j * M : (j + 1) * M] = C / s**2
-    Sr = B @ Sn @ B.T
+        Bj = B[:, j * M : (j + 1) * M]
+        Sr += Bj @ (C / s**2) @ Bj.T
     JtJ_inv = np.linalg.inv(J.T @ J)
     C_ols = JtJ_inv @ J.T @ Sr @ J @ JtJ_inv
     w, U = np.linalg.eigh(Sr)
     w_inv = np.where(w > 1e-10 * w.max(), 1.0 / np.maximum(w, 1e-300), 0.0)
     C_gls = np.linalg.inv(J.T @ (U * w_inv) @ U.T @ J)
 
-    G = np.asarray(jax.jacfwd(lambda f: pixel_intrinsics(T, *unpack_intrinsics(unravel(f)[0], aspect)))(flat0))
+    G = np.asarray(_intrinsics_jacobian(y0, jnp.asarray(T), aspect))
     return ErrorPrediction(jnp.asarray(G @ C_ols @ G.T), jnp.asarray(G @ C_gls @ G.T), float(K[1, 1]))

@@ -1,4 +1,4 @@
-"""Command line: ``sorjax calibrate OUTLINE...`` and ``sorjax table1``.
+"""Command line: ``sorjax calibrate OUTLINE...``, ``sorjax experiment CONFIG.toml`` and ``sorjax table1``.
 
 ``sorjax calibrate`` reads one outline per file (``.npy``, or text with two columns
 ``x y`` in pixels, e.g. ``.txt``/``.csv``), calibrates and prints K with its standard
@@ -55,15 +55,41 @@ def _calibrate(args) -> int:
     return 0
 
 
-def _table1(args) -> int:
-    root = Path(__file__).resolve().parent.parent / "experiments" / "table1.py"
-    if not root.is_file():
-        raise ValueError("experiments/table1.py is not available in this installation")
-    import runpy
+def _find_config(name: str) -> Path:
+    p = Path(name)
+    if p.is_file():
+        return p
+    repo = Path(__file__).resolve().parent.parent / "configs"
+    for cand in (repo / name, repo / f"{name}.toml"):
+        if cand.is_file():
+            return cand
+    known = sorted(c.stem for c in repo.glob("*.toml")) if repo.is_dir() else []
+    raise ValueError(f"{name}: no such config file" + (f" (bundled configs: {', '.join(known)})" if known else ""))
 
-    sys.argv = [str(root)] + (["--quick"] if args.quick else ["--trials", str(args.trials)]) + ["--seed", str(args.seed)]
-    runpy.run_path(str(root), run_name="__main__")
+
+def _experiment(args) -> int:
+    from .experiment import load_config, run_experiment
+
+    path = _find_config(args.config)
+    cfg = load_config(path)
+    res = run_experiment(cfg, out=args.out, trials=args.trials, seed=args.seed, workers=args.workers,
+                         progress=not args.quiet, source=path.read_text())
+    print((res.path / "table.md").read_text())
+    print(f"wrote {res.path}")
     return 0
+
+
+def _table1(args) -> int:
+    args.config = "table1-quick" if args.quick else "table1"
+    return _experiment(args)
+
+
+def _add_run_args(p):
+    p.add_argument("--out", default="runs", help="folder for the run directories (default: runs)")
+    p.add_argument("--trials", type=int, default=None, help="trials per row (overrides the config)")
+    p.add_argument("--seed", type=int, default=None, help="seed (overrides the config)")
+    p.add_argument("--workers", type=int, default=None, help="worker processes (0: one per core)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def main(argv=None) -> int:
@@ -74,10 +100,13 @@ def main(argv=None) -> int:
     c.add_argument("--method", default="bundle", choices=["bundle", "I", "IIa", "IIb"])
     c.add_argument("--aspect-ratio", type=float, default=None, help="known fu / fv")
     c.set_defaults(func=_calibrate)
-    t = sub.add_parser("table1", help="the paper's Table 1 on the two-sphere scene")
+    e = sub.add_parser("experiment", help="run an experiment config (configs/*.toml)")
+    e.add_argument("config", help="a TOML config file, or the name of one in configs/ (e.g. table1-quick)")
+    _add_run_args(e)
+    e.set_defaults(func=_experiment)
+    t = sub.add_parser("table1", help="the paper's Table 1 (configs/table1.toml; --quick: table1-quick.toml)")
     t.add_argument("--quick", action="store_true")
-    t.add_argument("--trials", type=int, default=100)
-    t.add_argument("--seed", type=int, default=0)
+    _add_run_args(t)
     t.set_defaults(func=_table1)
     args = p.parse_args(argv)
     try:

@@ -1,0 +1,256 @@
+"""Run an experiment config: trials in worker processes, then the run directory.
+
+``run_experiment`` writes ``<out>/<config name>/<timestamp>/``:
+
+* ``config.json`` the resolved config (every default filled in) and, when the config
+  came from a file, ``config.toml`` a copy of it;
+* ``environment.json`` Python, platform, package versions, JAX devices, the git
+  commit of the checkout when there is one;
+* ``results.json`` every trial (seed, true K, per method: estimate, signed errors in
+  % of f, standard deviations, result code, gross-failure flag, time, warnings;
+  the per-view fitted l_s and v_x), the per-row summary and the bounds;
+* ``table.md`` the paper's layout, ``results.csv`` one line per trial and method;
+* figures: ``error_vs_<axis>.png`` for each swept axis and ``scene.png``.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import json
+import math
+import multiprocessing
+import os
+import platform
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from ._config import Config
+from ._report import error_figures, records_csv, reference_lines, scene_figure, summarise, table_markdown
+from ._trials import fixed_scene, run_chunk, scene_for, trial_seed
+
+
+@dataclass
+class RunResult:
+    """What :func:`run_experiment` produced: the run directory (None when not
+    written), the per-trial records, the per-row summary, the bounds, the table."""
+
+    path: Path | None
+    records: list
+    summary: list
+    bounds: dict
+    table: str
+    seconds: float
+
+
+def enable_compilation_cache() -> None:
+    """Keep compiled XLA programs on disk between runs and worker processes
+    (``$SORJAX_CACHE`` or the user's cache folder), so only the first run compiles."""
+    import jax
+
+    root = os.environ.get("SORJAX_CACHE") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME", os.path.join(os.path.expanduser("~"), ".cache")), "sorjax", "xla")
+    try:
+        os.makedirs(root, exist_ok=True)
+        jax.config.update("jax_compilation_cache_dir", root)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
+        jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    except Exception:  # a read-only home: compile every time  # pragma: no cover
+        pass
+
+
+def _worker_init():
+    import sorjax  # noqa: F401  (float64 on)
+
+    enable_compilation_cache()
+
+
+def environment() -> dict:
+    import jax
+
+    pk = {}
+    for name in ("sorjax", "jax", "jaxlib", "optimistix", "equinox", "lineax", "numpy", "opencv-python-headless", "matplotlib"):
+        try:
+            pk[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            pk[name] = None
+    try:
+        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True,
+                                text=True, timeout=5).stdout.strip() or None
+    except Exception:  # pragma: no cover
+        commit = None
+    return dict(
+        python=sys.version.split()[0], platform=platform.platform(), cpu_count=os.cpu_count(), packages=pk,
+        jax_devices=[str(d) for d in jax.devices()], x64=bool(jax.config.jax_enable_x64), git_commit=commit,
+    )
+
+
+def compute_bounds(cfg: Config) -> dict:
+    """Per row, the efficiency bound of the bundle's ``(fu, fv, u0, v0)`` in % of f
+    (``"bound"`` for free aspect, ``"bound-unit"`` for a known aspect ratio 1), for
+    the fixed scene types.  The bound scales with sigma (the noise covariance is
+    proportional to sigma^2), so it is computed once per scene at sigma = 1 px."""
+    from .._uncertainty import predicted_error
+
+    if not cfg.bound or cfg.scene.type == "random_sor":
+        return {}
+    variants = {}
+    if "bundle" in cfg.methods or "IIa" in cfg.methods:
+        variants["bound"] = None
+    if "bundle-unit" in cfg.methods or "IIb" in cfg.methods or "I" in cfg.methods:
+        variants["bound-unit"] = 1.0
+    out = {k: {} for k in variants}
+    cache = {}
+    for r, row in enumerate(cfg.rows()):
+        for name, a in variants.items():
+            key = (row["f"], row["n_views"], name)
+            if key not in cache:
+                scene = fixed_scene(cfg.scene, row["f"], row["n_views"])
+                try:
+                    p = predicted_error(scene, 1.0, noise=cfg.noise.model, smooth_px=cfg.noise.smooth_px,
+                                        preserve_std=cfg.noise.preserve_std, aspect_ratio=a,
+                                        n_samples=cfg.fit.n_samples, n_points=cfg.fit.n_points)
+                    cache[key] = p.percent("bound")
+                except (ValueError, np.linalg.LinAlgError):
+                    cache[key] = None
+            v = cache[key]
+            out[name][r] = None if v is None else [float(x) * row["sigma"] for x in v]
+    return out
+
+
+class _Progress:
+    def __init__(self, total: int, enabled: bool):
+        self.total, self.done, self.enabled, self.t0 = total, 0, enabled and total > 0, time.perf_counter()
+
+    def update(self, n: int):
+        self.done += n
+        if not self.enabled:
+            return
+        frac = self.done / self.total
+        bar = "#" * int(30 * frac) + "." * (30 - int(30 * frac))
+        el = time.perf_counter() - self.t0
+        eta = el / frac - el if frac > 0 else math.nan
+        print(f"\r[{bar}] {self.done}/{self.total} trials  {el:5.0f} s  (eta {eta:4.0f} s)", end="", file=sys.stderr,
+              flush=True)
+        if self.done >= self.total:
+            print(file=sys.stderr, flush=True)
+
+
+def _tasks(cfg: Config):
+    return [(r, row, t) for r, row in enumerate(cfg.rows()) for t in range(cfg.trials)]
+
+
+def run_trials(cfg: Config, workers: int | None = None, progress: bool = True) -> list[dict]:
+    """Run every trial of ``cfg`` and return the records sorted by (row, trial).
+    ``workers``: processes (default ``cfg.workers``; 0 = one per CPU core; 1 runs in
+    this process)."""
+    tasks = _tasks(cfg)
+    workers = cfg.workers if workers is None else workers
+    workers = (os.cpu_count() or 1) if workers == 0 else workers
+    workers = max(1, min(workers, len(tasks)))
+    bar = _Progress(len(tasks), progress)
+    if workers == 1:
+        enable_compilation_cache()
+        records = []
+        for t in tasks:
+            records.extend(run_chunk(cfg, [t]))
+            bar.update(1)
+        return records
+    size = max(1, min(8, len(tasks) // (4 * workers)))
+    chunks = [tasks[i : i + size] for i in range(0, len(tasks), size)]
+    records = []
+    ctx = multiprocessing.get_context("spawn")
+    with cf.ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init) as ex:
+        futs = {ex.submit(run_chunk, cfg, c): len(c) for c in chunks}
+        for fut in cf.as_completed(futs):
+            records.extend(fut.result())
+            bar.update(futs[fut])
+    return sorted(records, key=lambda x: (x["row"], x["trial"]))
+
+
+def run_experiment(cfg: Config, out: str | os.PathLike | None = "runs", *, trials: int | None = None,
+                   seed: int | None = None, workers: int | None = None, progress: bool = True,
+                   source: str | None = None) -> RunResult:
+    """Run ``cfg`` (``trials``/``seed`` override the config's) and, unless ``out`` is
+    None, write the run directory ``out/<name>/<UTC timestamp>/``."""
+    if trials is not None:
+        if trials < 1:
+            raise ValueError(f"trials must be >= 1, got {trials}")
+        cfg = cfg.replace(trials=int(trials))
+    if seed is not None:
+        if seed < 0:
+            raise ValueError(f"seed must be >= 0, got {seed}")
+        cfg = cfg.replace(seed=int(seed))
+    enable_compilation_cache()
+    t0 = time.perf_counter()
+    records = run_trials(cfg, workers, progress)
+    seconds = time.perf_counter() - t0
+    bounds = compute_bounds(cfg)
+    summary = summarise(cfg, records)
+    table = table_markdown(cfg, summary, bounds)
+    res = RunResult(None, records, summary, bounds, table, seconds)
+    if out is None:
+        return res
+    stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S.%fZ")
+    path = Path(out) / cfg.name / stamp
+    path.mkdir(parents=True, exist_ok=False)
+    (path / "config.json").write_text(json.dumps(cfg.to_dict(), indent=1))
+    if source is not None:
+        (path / "config.toml").write_text(source)
+    (path / "environment.json").write_text(json.dumps(environment(), indent=1))
+    (path / "results.json").write_text(json.dumps(
+        dict(name=cfg.name, seed=cfg.seed, trials=cfg.trials, seconds=seconds, records=records, summary=summary,
+             bounds={k: {str(r): v for r, v in b.items()} for k, b in bounds.items()}),
+        indent=1, default=_json_default))
+    extra = "\n".join(reference_lines(cfg, summary))
+    (path / "table.md").write_text(
+        f"# {cfg.name}\n\n{cfg.description}\n\nRMS error in % of f over the trials that are not gross failures "
+        f"(failed, or focal error above {cfg.gross_error:g} %; their number in brackets); {cfg.trials} trials per "
+        f"row, seed {cfg.seed}, {seconds:.0f} s.\n\n{table}\n" + (f"\n{extra}\n" if extra else ""))
+    (path / "results.csv").write_text(records_csv(cfg, records))
+    error_figures(cfg, summary, bounds, path)
+    _scene_plot(cfg, records, path)
+    res.path = path
+    return res
+
+
+def _scene_plot(cfg: Config, records: list[dict], path: Path) -> None:
+    from .. import scenes
+
+    rec = next((r for r in records if r["row"] == 0 and "error" not in r), None)
+    if rec is None:
+        return
+    row = cfg.rows()[0]
+    scene = scene_for(cfg, row, rec["seed"])
+    rng = np.random.default_rng(rec["seed"])
+    if cfg.noise.model == "gaussian":
+        noisy = [scenes.gaussian_noise(o, row["sigma"], rng) for o in scene.outlines]
+    else:
+        noisy = [scenes.paper_noise(o, row["sigma"], rng, smooth_px=cfg.noise.smooth_px,
+                                    preserve_std=cfg.noise.preserve_std) for o in scene.outlines]
+    homs = [_Line(l) for l in rec.get("l_s", [])] or None
+    title = f"{cfg.name}: row 0 (" + ", ".join(f"{k}={v}" for k, v in row.items() if v is not None) + \
+        f"), trial 0, seed {rec['seed']}"
+    scene_figure(scene, noisy, homs, path / "scene.png", title)
+
+
+@dataclass
+class _Line:
+    l_s: list
+
+
+def _json_default(x):
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    raise TypeError(f"not JSON-serialisable: {type(x).__name__}")
+
+
+__all__ = ["RunResult", "run_experiment", "run_trials", "compute_bounds", "environment", "trial_seed"]
