@@ -10,10 +10,11 @@ import jax as _jax
 _jax.config.update("jax_enable_x64", True)
 
 from ._calibration import RESULTS, Calibration, CalibrationError, calibrate  # noqa: E402
+from ._extract import outlines_from_image, outlines_from_mask  # noqa: E402
 from ._homology import Homology, fit_homology, homology_matrix  # noqa: E402
 from ._outline import Outline, make_outline  # noqa: E402
 from ._uncertainty import ErrorPrediction, predicted_error  # noqa: E402
-from . import losses, scenes  # noqa: E402
+from . import losses, render, scenes  # noqa: E402
 
 __all__ = [
     "RESULTS",
@@ -27,6 +28,9 @@ __all__ = [
     "homology_matrix",
     "losses",
     "make_outline",
+    "outlines_from_image",
+    "outlines_from_mask",
     "predicted_error",
+    "render",
     "scenes",
 ]

@@ -1,0 +1,772 @@
+"""Sub-pixel outlines of objects from masks and from colour photographs.
+
+Pixel convention (OpenCV)
+-------------------------
+The centre of pixel ``(row i, column j)`` is the image point ``x = j, y = i``; pixel
+``(i, j)`` covers the square ``[j - 0.5, j + 0.5] x [i - 0.5, i + 0.5]``.  The centre of
+the top-left pixel is therefore ``(0, 0)`` and the image of width ``W`` and height ``H``
+spans ``[-0.5, W - 0.5] x [-0.5, H - 0.5]``.  ``x`` grows to the right, ``y`` downwards.
+Outlines are in pixels in this convention, as everywhere in sorjax.
+
+Method
+------
+An outline is the 0.5 level set of the mask blurred by a Gaussian of ``smooth`` pixels
+(standard deviation), traced by marching squares with linear interpolation between
+pixel centres and refined along each grid line by cubic (Catmull-Rom) interpolation.
+For a soft mask whose value is the fraction of each pixel covered by the object (an
+anti-aliased render or an alpha matte) the 0.5 level set of a straight edge is exactly
+the edge, whatever the blur; for a binary mask (a pixel is in when its centre is) it is
+unbiased and the blur averages out the staircase.  ``cv2.findContours`` instead returns
+the centres of the boundary pixels: about half a pixel inside the true edge.
+
+Outlines are closed ``(N, 2)`` float64 arrays without a repeated end point, with a
+positive shoelace area in pixel coordinates (clockwise as displayed, because ``y``
+points down) and starting at their top-most point, the convention of
+:mod:`sorjax.scenes`; consecutive points are at most about one pixel apart.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from typing import Sequence
+
+import cv2
+import numpy as np
+
+__all__ = ["outlines_from_mask", "outlines_from_image"]
+
+_BORDER_MODES = ("refuse", "cut", "raise")
+
+
+# ----------------------------------------------------------------------------------
+# Marching squares
+# ----------------------------------------------------------------------------------
+
+# Cell corners (x, y) in cell-local coordinates and the corners of each cell edge:
+# tl = (0, 0), tr = (1, 0), br = (1, 1), bl = (0, 1); edges T, R, B, L.
+_CORNERS = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+_EDGE_CORNERS = ((0, 1), (1, 2), (2, 3), (3, 0))
+_EDGE_MID = np.array([[0.5, 0.0], [1.0, 0.5], [0.5, 1.0], [0.0, 0.5]])
+
+
+def _segment_table():
+    """Oriented segments ``(from_edge, to_edge)`` of every marching-squares case.
+
+    Key ``(case, centre_inside)``; ``case`` has bit k set when corner k (tl, tr, br, bl)
+    is inside.  Segments are oriented with the inside on their right as displayed
+    (``y`` down), so that outer boundaries come out with a positive shoelace area and
+    holes with a negative one.  Saddles (cases 5 and 10) join the inside corners
+    through the centre when the cell's mean value is inside.
+    """
+    table = {}
+    for case in range(16):
+        ins = [(case >> k) & 1 == 1 for k in range(4)]
+        for centre in (False, True):
+            crossing = [e for e, (a, b) in enumerate(_EDGE_CORNERS) if ins[a] != ins[b]]
+            if not crossing:
+                table[case, centre] = ()
+                continue
+            if len(crossing) == 2:
+                pairs = [tuple(crossing)]
+            else:  # saddle: isolate the corners of the label that does not touch the centre
+                lonely = [k for k in range(4) if ins[k] != centre]
+                pairs = []
+                for k in lonely:
+                    pairs.append(tuple(e for e in range(4) if k in _EDGE_CORNERS[e]))
+            segs = []
+            for e0, e1 in pairs:
+                p, q = _EDGE_MID[e0], _EDGE_MID[e1]
+                d = q - p
+                side = np.array([d[0] * (c[1] - p[1]) - d[1] * (c[0] - p[0]) for c in _CORNERS])
+                pos, neg = np.flatnonzero(side > 0), np.flatnonzero(side < 0)
+                ref = pos if len(pos) <= len(neg) else neg
+                k = int(ref[0])
+                on_right = side[k] > 0
+                segs.append((e0, e1) if on_right == ins[k] else (e1, e0))
+            table[case, centre] = tuple(segs)
+    return table
+
+
+_TABLE = _segment_table()
+
+
+def _catmull_rom_root(f, t):
+    """Refine the crossing ``t`` in [0, 1] of ``f = (f_-1, f_0, f_1, f_2) - level`` (n, 4) by
+    Newton on the Catmull-Rom cubic through the four samples; falls back to ``t`` when
+    the refined root leaves the interval."""
+    p0, p1, p2, p3 = f.T
+    a = -0.5 * p0 + 1.5 * p1 - 1.5 * p2 + 0.5 * p3
+    b = p0 - 2.5 * p1 + 2.0 * p2 - 0.5 * p3
+    c = -0.5 * p0 + 0.5 * p2
+    d = p1
+    u = t.copy()
+    for _ in range(4):
+        val = ((a * u + b) * u + c) * u + d
+        der = (3.0 * a * u + 2.0 * b) * u + c
+        ok = np.abs(der) > 1e-12
+        u = np.where(ok, u - val / np.where(ok, der, 1.0), u)
+    bad = ~np.isfinite(u) | (u < -0.01) | (u > 1.01)
+    return np.clip(np.where(bad, t, u), 0.0, 1.0)
+
+
+def _trace_level(F: np.ndarray, level: float = 0.5) -> list[np.ndarray]:
+    """All closed ``level`` lines of the 2-D field ``F`` (x = column, y = row).
+
+    ``F`` must be ``level``-free on its outer ring of samples (below the level), so every
+    line is closed.  Returns loops with the inside (``F >= level``) on their right as
+    displayed: outer boundaries have a positive shoelace area, holes a negative one.
+    """
+    H, W = F.shape
+    inside = F >= level
+    case = (
+        inside[:-1, :-1].astype(np.int8)
+        + 2 * inside[:-1, 1:]
+        + 4 * inside[1:, 1:]
+        + 8 * inside[1:, :-1]
+    )
+    ci, cj = np.nonzero((case != 0) & (case != 15))
+    if len(ci) == 0:
+        return []
+    cc = case[ci, cj]
+    centre = (F[ci, cj] + F[ci, cj + 1] + F[ci + 1, cj] + F[ci + 1, cj + 1]) >= 4.0 * level
+    # global edge ids: horizontal edge (i, j)-(i, j+1) -> i*W + j; vertical (i, j)-(i+1, j)
+    # -> H*W + i*W + j.  Cell (i, j): T = h(i, j), R = v(i, j+1), B = h(i+1, j), L = v(i, j).
+    edge_id = np.stack(
+        [ci * W + cj, H * W + ci * W + cj + 1, (ci + 1) * W + cj, H * W + ci * W + cj], axis=1
+    )
+    src, dst = [], []
+    for (cs, cen), segs in _TABLE.items():
+        if not segs:
+            continue
+        sel = np.flatnonzero((cc == cs) & (centre == cen))
+        if len(sel) == 0:
+            continue
+        for e0, e1 in segs:
+            src.append(edge_id[sel, e0])
+            dst.append(edge_id[sel, e1])
+    src = np.concatenate(src)
+    dst = np.concatenate(dst)
+
+    # crossing points (level set on each crossed grid edge), with cubic refinement
+    ids = np.unique(src)
+    horiz = ids < H * W
+    k = np.where(horiz, ids, ids - H * W)
+    i, j = k // W, k % W
+    pts = np.empty((len(ids), 2))
+    for is_h in (True, False):
+        m = horiz == is_h
+        ii, jj = i[m], j[m]
+        if is_h:  # samples along the row, from column j-1 to j+2
+            cols = np.clip(jj[:, None] + np.arange(-1, 3)[None], 0, W - 1)
+            f = F[ii[:, None], cols] - level
+        else:
+            rows = np.clip(ii[:, None] + np.arange(-1, 3)[None], 0, H - 1)
+            f = F[rows, jj[:, None]] - level
+        t = f[:, 1] / (f[:, 1] - f[:, 2])
+        t = _catmull_rom_root(f, t)
+        if is_h:
+            pts[m] = np.column_stack([jj + t, ii.astype(np.float64)])
+        else:
+            pts[m] = np.column_stack([jj.astype(np.float64), ii + t])
+
+    nxt = dict(zip(src.tolist(), dst.tolist()))
+    pos = dict(zip(ids.tolist(), range(len(ids))))
+    seen: set[int] = set()
+    loops = []
+    for s in src.tolist():
+        if s in seen:
+            continue
+        loop = []
+        e = s
+        while e not in seen:
+            seen.add(e)
+            loop.append(pos[e])
+            e = nxt[e]
+        if len(loop) >= 3:
+            loops.append(pts[np.asarray(loop)])
+    return loops
+
+
+def _shoelace(p: np.ndarray) -> float:
+    q = np.roll(p, -1, axis=0)
+    return 0.5 * float(np.sum(p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]))
+
+
+def _clean_loop(p: np.ndarray) -> np.ndarray:
+    """Drop repeated consecutive points (and a repeated end point); start at the top."""
+    d = np.hypot(*(np.roll(p, -1, axis=0) - p).T)
+    p = p[d > 1e-9]
+    s = int(np.argmin(p[:, 1] + 1e-9 * p[:, 0]))
+    return np.ascontiguousarray(np.roll(p, -s, axis=0), dtype=np.float64)
+
+
+# ----------------------------------------------------------------------------------
+# Input checks
+# ----------------------------------------------------------------------------------
+
+
+def _as_field(mask, label) -> np.ndarray:
+    """The mask as a float64 field in [0, 1] (1 = object), with clear errors."""
+    if isinstance(mask, (str, bytes)) or mask is None:
+        raise ValueError(
+            f"mask must be a 2-D array (H, W), got {type(mask).__name__}; read an image file "
+            "first, e.g. cv2.imread(path, cv2.IMREAD_UNCHANGED)"
+        )
+    m = np.asarray(mask)
+    if m.ndim == 3 and m.shape[2] == 1:
+        m = m[:, :, 0]
+    if m.ndim == 3 and m.shape[2] in (3, 4):
+        raise ValueError(
+            f"mask has shape {m.shape}: that looks like a colour image. Pass a single-channel "
+            "mask (H, W), e.g. cv2.imread(path, cv2.IMREAD_GRAYSCALE), or use "
+            "sorjax.outlines_from_image for a photograph"
+        )
+    if m.ndim != 2:
+        raise ValueError(f"mask must be a 2-D array (H, W), got shape {m.shape}")
+    if m.shape[0] < 3 or m.shape[1] < 3:
+        raise ValueError(f"mask must be at least 3x3 pixels, got {m.shape[0]}x{m.shape[1]}")
+    if m.dtype == object or not (np.issubdtype(m.dtype, np.number) or m.dtype == bool):
+        raise ValueError(f"mask must be numeric or boolean, got dtype {m.dtype}")
+    if label is not None:
+        if np.issubdtype(m.dtype, np.floating) and not np.all(np.isfinite(m)):
+            raise ValueError("label image contains NaN or infinite values")
+        sel = m == label
+        if not sel.any():
+            vals = np.unique(m)
+            shown = ", ".join(str(v) for v in vals[:20]) + (" ..." if len(vals) > 20 else "")
+            raise ValueError(f"label {label!r} does not occur in the label image (values present: {shown})")
+        return sel.astype(np.float64)
+    if m.dtype == bool:
+        return m.astype(np.float64)
+    if np.issubdtype(m.dtype, np.floating):
+        if not np.all(np.isfinite(m)):
+            raise ValueError("mask contains NaN or infinite values")
+        lo, hi = float(m.min()), float(m.max())
+        if lo < -1e-9 or hi > 1.0 + 1e-9:
+            raise ValueError(
+                f"a float mask must hold values in [0, 1] (0 background, 1 object, fractions "
+                f"at anti-aliased edges); got values in [{lo:g}, {hi:g}]. Divide an 8-bit mask "
+                "by 255, or pass a label image with label=VALUE"
+            )
+        return np.clip(m.astype(np.float64), 0.0, 1.0)
+    # integer masks
+    lo, hi = int(m.min()), int(m.max())
+    if lo >= 0 and hi <= 1:
+        return m.astype(np.float64)
+    if lo >= 0 and hi == 255:
+        return m.astype(np.float64) / 255.0  # 0/255 binary or 8-bit soft alpha
+    raise ValueError(
+        f"integer mask with values in [{lo}, {hi}]: expected 0/1 or 0/255 (or an 8-bit soft "
+        "mask up to 255). If this is a label image (one value per object), pass label=VALUE "
+        "to choose the object(s)"
+    )
+
+
+def _check_options(min_area, smooth, border) -> tuple[float, float]:
+    try:
+        min_area = float(min_area)
+        smooth = float(smooth)
+    except (TypeError, ValueError):
+        raise ValueError("min_area and smooth must be numbers (pixels^2 and pixels)") from None
+    if not (math.isfinite(min_area) and min_area >= 0):
+        raise ValueError(f"min_area must be a finite number >= 0 (pixels^2), got {min_area}")
+    if not (math.isfinite(smooth) and 0 <= smooth <= 20):
+        raise ValueError(f"smooth must be between 0 and 20 pixels (Gaussian sigma), got {smooth}")
+    if border not in _BORDER_MODES:
+        raise ValueError(f"border must be one of {_BORDER_MODES}, got {border!r}")
+    return min_area, smooth
+
+
+def _blur(F: np.ndarray, sigma: float) -> np.ndarray:
+    if sigma <= 0:
+        return F
+    r = max(1, int(math.ceil(4.0 * sigma)))
+    return cv2.GaussianBlur(F, (2 * r + 1, 2 * r + 1), sigmaX=sigma, sigmaY=sigma, borderType=cv2.BORDER_REPLICATE)
+
+
+def _border_sides(p: np.ndarray, shape, margin: float = 1.0) -> list[str]:
+    """Image sides the outline comes within ``margin`` px of (the image spans
+    [-0.5, W - 0.5] x [-0.5, H - 0.5])."""
+    H, W = shape
+    sides = []
+    if p[:, 0].min() < -0.5 + margin:
+        sides.append("left")
+    if p[:, 0].max() > W - 0.5 - margin:
+        sides.append("right")
+    if p[:, 1].min() < -0.5 + margin:
+        sides.append("top")
+    if p[:, 1].max() > H - 0.5 - margin:
+        sides.append("bottom")
+    return sides
+
+
+def _describe(p: np.ndarray, area: float) -> str:
+    x0, y0 = p.min(0)
+    x1, y1 = p.max(0)
+    return f"area {area:.0f} px^2, x {x0:.0f}..{x1:.0f}, y {y0:.0f}..{y1:.0f}"
+
+
+def _outlines_from_field(F, *, min_area, smooth, border, what="mask", names=None):
+    """Outer 0.5-level outlines of the field F (H, W) in [0, 1]; see outlines_from_mask."""
+    H, W = F.shape
+    G = _blur(F, smooth)
+    # a ring of zeros closes every level line: an object cut by the frame gets the frame
+    # (-0.5 or W - 0.5) as part of its outline
+    G = np.pad(G, 1, mode="constant", constant_values=0.0)
+    loops = [(_shoelace(p), p - 1.0) for p in _trace_level(G, 0.5)]
+    outer = sorted([(a, p) for a, p in loops if a > 0], key=lambda ap: -ap[0])
+    if not outer:
+        raise ValueError(
+            f"the {what} holds no object: no pixel reaches 0.5 after smoothing (max "
+            f"{float(F.max()):.3g}). Check that the object is marked with 1 (or 255) on 0, "
+            "or pass label=VALUE for a label image"
+        )
+    big = [(a, p) for a, p in outer if a >= min_area]
+    if not big:
+        raise ValueError(
+            f"the {what} holds no object of at least min_area = {min_area:g} px^2 (largest: "
+            f"{outer[0][0]:.1f} px^2); lower min_area if the objects are really that small"
+        )
+    out, refused = [], []
+    for k, (a, p) in enumerate(big):
+        p = _clean_loop(p)
+        sides = _border_sides(p, (H, W))
+        if sides and border != "cut":
+            msg = (
+                f"{what}: object {k} ({_describe(p, a)}) touches the image border ({', '.join(sides)}): "
+                "part of it may lie outside the image, so its outline is not the object's "
+                "silhouette. Refused; reframe so that the whole object is visible, or pass "
+                "border='cut' to keep the cut outline"
+            )
+            if border == "raise":
+                raise ValueError(msg)
+            warnings.warn(msg, stacklevel=3)
+            refused.append(k)
+            continue
+        out.append(p)
+    if not out:
+        raise ValueError(
+            f"every object in the {what} ({len(refused)}) touches the image border and was "
+            "refused (see the warnings); reframe, or pass border='cut'"
+        )
+    return out
+
+
+def outlines_from_mask(
+    mask,
+    *,
+    label=None,
+    min_area: float = 100.0,
+    smooth: float = 1.0,
+    border: str = "refuse",
+) -> list[np.ndarray]:
+    """Sub-pixel outlines of the objects of a mask, largest first.
+
+    Parameters
+    ----------
+    mask : (H, W) array
+        * bool, or integer 0/1 or 0/255: a binary mask (object = True/1/255);
+        * uint8 with values up to 255: an 8-bit soft mask (alpha 255 = object);
+        * float in [0, 1]: a soft mask, e.g. the fraction of each pixel covered by the
+          object (anti-aliased render, alpha matte);
+        * any other integer array is a label image: pass ``label``.
+    label : scalar, optional
+        With a label image, the value of the pixels of the object(s) wanted; the mask is
+        ``mask == label``.
+    min_area : float
+        Objects enclosing less than this many pixels^2 are ignored (specks).
+    smooth : float
+        Standard deviation, in pixels, of the Gaussian applied to the mask before the 0.5
+        level set is traced (0: none).  About 1 px removes the staircase of binary masks
+        while moving a curved edge by only ``~smooth^2 / (2 R)`` px (``R`` the radius of
+        curvature in px) and rounding sharp corners over about ``2 smooth`` px.
+    border : {"refuse", "cut", "raise"}
+        What to do with an object whose outline comes within 1 px of the image border
+        (it may continue outside the image, so its outline is not its silhouette):
+        "refuse" drops it with a warning naming the object and the side, "cut" keeps
+        it with the image frame (``x = -0.5``, ``x = W - 0.5``, ...) as part of its
+        outline, "raise" raises ValueError.
+
+    Returns
+    -------
+    list of (N, 2) float64 arrays
+        One closed outline per object (connected region of the smoothed mask >= 0.5),
+        largest area first, in pixels with the OpenCV convention: the centre of pixel
+        ``(row i, column j)`` is ``(x, y) = (j, i)``.  No repeated end point, positive
+        shoelace area (clockwise as displayed), starting at the top-most point, points at
+        most about 1 px apart.  Only the outer boundary: holes are ignored.  Never empty.
+
+    Raises
+    ------
+    ValueError
+        Wrong shape or dtype, values out of range, a label that does not occur, no object
+        (or none of ``min_area``), or every object refused at the border.
+    """
+    min_area, smooth = _check_options(min_area, smooth, border)
+    F = _as_field(mask, label)
+    return _outlines_from_field(F, min_area=min_area, smooth=smooth, border=border)
+
+
+# ----------------------------------------------------------------------------------
+# From colour images
+# ----------------------------------------------------------------------------------
+
+
+def _as_bgr8(image) -> np.ndarray:
+    """(H, W, 3) uint8 BGR from uint8/uint16/float colour or grey images."""
+    if isinstance(image, (str, bytes)) or image is None:
+        raise ValueError(
+            f"image must be an array (H, W, 3), got {type(image).__name__}; read the file "
+            "first with cv2.imread(path)"
+        )
+    im = np.asarray(image)
+    if im.ndim == 2:
+        im = im[:, :, None]
+    if im.ndim != 3 or im.shape[2] not in (1, 3, 4):
+        raise ValueError(
+            f"image must be (H, W, 3) BGR (as cv2.imread returns), (H, W, 4) or (H, W) grey; "
+            f"got shape {im.shape}"
+        )
+    if im.shape[0] < 16 or im.shape[1] < 16:
+        raise ValueError(f"image is too small ({im.shape[1]}x{im.shape[0]} px): need at least 16x16")
+    if im.dtype == np.uint8:
+        out = im
+    elif im.dtype == np.uint16:
+        out = (im.astype(np.float64) / 257.0 + 0.5).astype(np.uint8)
+    elif np.issubdtype(im.dtype, np.floating):
+        if not np.all(np.isfinite(im)):
+            raise ValueError("image contains NaN or infinite values")
+        lo, hi = float(im.min()), float(im.max())
+        if lo < -1e-6 or hi > 1.0 + 1e-6:
+            raise ValueError(
+                f"a float image must hold values in [0, 1]; got [{lo:g}, {hi:g}] (convert "
+                "8-bit data to uint8, or divide by 255)"
+            )
+        out = np.clip(np.round(im * 255.0), 0, 255).astype(np.uint8)
+    else:
+        raise ValueError(f"image dtype must be uint8, uint16 or float, got {im.dtype}")
+    if out.shape[2] == 1:
+        out = np.repeat(out, 3, axis=2)
+    elif out.shape[2] == 4:
+        out = out[:, :, :3]
+    return np.ascontiguousarray(out)
+
+
+def _check_boxes(boxes, shape) -> list[tuple[int, int, int, int]]:
+    H, W = shape
+    try:
+        arr = [tuple(float(v) for v in b) for b in boxes]
+    except (TypeError, ValueError):
+        raise ValueError("boxes must be a sequence of (x0, y0, x1, y1) boxes in pixels") from None
+    if len(arr) == 0:
+        raise ValueError("boxes is empty: pass None for automatic detection, or at least one box")
+    out = []
+    for k, b in enumerate(arr):
+        if len(b) != 4 or not all(math.isfinite(v) for v in b):
+            raise ValueError(f"box {k} must be 4 finite numbers (x0, y0, x1, y1) in pixels, got {b}")
+        x0, y0, x1, y1 = b
+        if not (x1 > x0 + 4 and y1 > y0 + 4):
+            raise ValueError(
+                f"box {k} = {b}: need x1 > x0 and y1 > y0 (corners top-left, bottom-right, at "
+                "least 5 px apart)"
+            )
+        if x1 < 0 or y1 < 0 or x0 > W - 1 or y0 > H - 1:
+            raise ValueError(f"box {k} = {b} lies outside the {W}x{H} image")
+        xi0, yi0 = max(0, int(math.floor(x0))), max(0, int(math.floor(y0)))
+        xi1, yi1 = min(W - 1, int(math.ceil(x1))), min(H - 1, int(math.ceil(y1)))
+        out.append((xi0, yi0, xi1, yi1))
+    return out
+
+
+def _grabcut(img: np.ndarray, mask: np.ndarray | None, rect, iterations: int) -> np.ndarray:
+    """Foreground (bool) of cv2.grabCut, deterministic (OpenCV's RNG reseeded)."""
+    cv2.setRNGSeed(12345)
+    bgd = np.zeros((1, 65), np.float64)
+    fgd = np.zeros((1, 65), np.float64)
+    if mask is None:
+        m = np.zeros(img.shape[:2], np.uint8)
+        cv2.grabCut(img, m, rect, bgd, fgd, iterations, cv2.GC_INIT_WITH_RECT)
+    else:
+        m = mask.copy()
+        cv2.grabCut(img, m, None, bgd, fgd, iterations, cv2.GC_INIT_WITH_MASK)
+    return (m == cv2.GC_FGD) | (m == cv2.GC_PR_FGD)
+
+
+def _largest_component(fg: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(fg.astype(np.uint8), connectivity=8)
+    if n <= 1:
+        return np.zeros_like(fg, dtype=bool)
+    k = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    comp = lab == k
+    # fill holes: outer boundary only
+    cnts, _ = cv2.findContours(comp.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    filled = np.zeros(fg.shape, np.uint8)
+    cv2.drawContours(filled, cnts, -1, 1, thickness=cv2.FILLED)
+    return filled.astype(bool)
+
+
+def _soft_alpha(img: np.ndarray, fg: np.ndarray, *, rounds: int = 2, sigma: float = 0.8) -> np.ndarray:
+    """Soft mask: the binary segmentation ``fg`` refined by unmixing its boundary pixels.
+
+    A pixel next to the boundary (within 1.5 px) is modelled as ``a F + (1 - a) B``: ``a``
+    the fraction of it that the object covers, ``F`` and ``B`` the local object and
+    background colours.  ``B`` is the Gaussian-weighted (``sigma`` px) mean colour of the
+    background pixels 1.5 to 3.5 px from the boundary; ``F`` is the same mean over the
+    object's pixels 1.5 to 2.5 px inside, extrapolated to the pixel with the colour
+    gradient between that ring and the next one (objects darken or brighten towards
+    their limb).  ``a`` is the projection of the colour onto the segment ``B -> F``.  The
+    binary value is kept where the model does not fit: contrast ``|F - B|`` below 12
+    levels, a colour farther than ``max(12, 0.3 |F - B|)`` from the segment, or local
+    colour spread above ``0.25 |F - B|``.  Repeated ``rounds`` times from ``a >= 0.5``.
+    """
+    I = img.astype(np.float32)
+    alpha = fg.astype(np.float64)
+
+    def wmean(src):
+        w = cv2.GaussianBlur(src, (0, 0), sigma)
+        m = cv2.GaussianBlur(I * src[:, :, None], (0, 0), sigma) / np.maximum(w, 1e-6)[:, :, None]
+        m2 = cv2.GaussianBlur(np.sum(I * I, axis=2) * src, (0, 0), sigma) / np.maximum(w, 1e-6)
+        return w, m, np.maximum(m2 - np.sum(m * m, axis=2), 0.0)
+
+    for _ in range(rounds):
+        cur = alpha >= 0.5
+        if not cur.any() or cur.all():
+            return alpha
+        u8 = cur.astype(np.uint8)
+        din = cv2.distanceTransform(u8, cv2.DIST_L2, 5)
+        dout = cv2.distanceTransform(1 - u8, cv2.DIST_L2, 5)
+        f2 = ((din >= 1.5) & (din < 2.5)).astype(np.float32)
+        f3 = ((din >= 2.5) & (din < 3.5)).astype(np.float32)
+        wf, Fm, vf = wmean(np.maximum(f2, f3))
+        wb, Bc, vb = wmean(((dout >= 1.5) & (dout < 3.5)).astype(np.float32))
+        w2, F2, _ = wmean(f2)
+        w3, F3, _ = wmean(f3)
+        have2 = w2 > 1e-3
+        grad = np.where((have2 & (w3 > 1e-3))[:, :, None], F2 - F3, 0.0)
+        steps = np.clip(np.where(cur, 2.0 - din, 1.0 + dout), 0.0, 2.5)[:, :, None]
+        Fc = np.where(have2[:, :, None], F2, Fm) + grad * steps
+        d = (Fc - Bc).astype(np.float64)
+        d2 = np.sum(d * d, axis=2)
+        e = (I - Bc).astype(np.float64)
+        a = np.sum(e * d, axis=2) / np.maximum(d2, 1e-9)
+        res = np.sqrt(np.maximum(np.sum(e * e, axis=2) - a * a * d2, 0.0))
+        c = np.sqrt(d2)
+        near = ((din > 0) & (din <= 1.5)) | ((dout > 0) & (dout <= 1.5))
+        ok = (near & (wf > 1e-3) & (wb > 1e-3) & (c >= 12.0) & (res <= np.maximum(12.0, 0.3 * c))
+              & (np.sqrt(np.maximum(vf, vb)) <= 0.25 * c))
+        new = cur.astype(np.float64)
+        new[ok] = np.clip(a[ok], 0.0, 1.0)
+        alpha = new
+    return alpha
+
+
+def _crop_box(box, shape, margin_frac=0.15, margin_min=12):
+    H, W = shape
+    x0, y0, x1, y1 = box
+    m = max(margin_min, int(round(margin_frac * max(x1 - x0, y1 - y0))))
+    return max(0, x0 - m), max(0, y0 - m), min(W, x1 + m + 1), min(H, y1 + m + 1)
+
+
+def _object_from_box(img, box, k, *, iterations, min_area, smooth, border, refine, init=None):
+    """Outline of the object in ``box`` (or None, with a warning, when refused)."""
+    H, W = img.shape[:2]
+    cx0, cy0, cx1, cy1 = _crop_box(box, (H, W))
+    crop = np.ascontiguousarray(img[cy0:cy1, cx0:cx1])
+    if init is None:
+        rect = (box[0] - cx0, box[1] - cy0, box[2] - box[0] + 1, box[3] - box[1] + 1)
+        fg = _grabcut(crop, None, rect, iterations)
+    else:
+        fg = _grabcut(crop, np.ascontiguousarray(init[cy0:cy1, cx0:cx1]), None, iterations)
+    fg = _largest_component(fg)
+    if fg.sum() < max(min_area, 1.0):
+        warnings.warn(
+            f"box {k} {tuple(box)}: no object found inside (GrabCut kept {int(fg.sum())} px); "
+            "check the box encloses the object with a small margin",
+            stacklevel=3,
+        )
+        return None
+    if init is None:
+        # GrabCut forces everything outside the box to background: an object reaching a
+        # side of the box (one that is not on the image border) was cut by the box
+        bx0, by0, bx1, by1 = box[0] - cx0, box[1] - cy0, box[2] - cx0, box[3] - cy0
+        sides = {
+            "left": (box[0] > 0, fg[by0 : by1 + 1, bx0]),
+            "right": (box[2] < W - 1, fg[by0 : by1 + 1, bx1]),
+            "top": (box[1] > 0, fg[by0, bx0 : bx1 + 1]),
+            "bottom": (box[3] < H - 1, fg[by1, bx0 : bx1 + 1]),
+        }
+        cut = [name for name, (inside_image, line) in sides.items() if inside_image and line.sum() > 2]
+        if cut:
+            warnings.warn(
+                f"box {k} {tuple(box)}: the object reaches the box's {', '.join(cut)} side, so "
+                "the box cuts it (or the segmentation leaked); refused. Enlarge the box",
+                stacklevel=3,
+            )
+            return None
+    alpha = _soft_alpha(crop, fg) if refine else fg.astype(np.float64)
+    # the crop is only a window: pad it with background where it is not at the image border
+    pad = ((3 if cy0 > 0 else 0, 3 if cy1 < H else 0), (3 if cx0 > 0 else 0, 3 if cx1 < W else 0))
+    big = np.pad(alpha, pad, mode="constant")
+    try:
+        outs = _outlines_from_field(big, min_area=min_area, smooth=smooth,
+                                    border="cut" if border == "cut" else "raise", what="segmentation")
+    except ValueError as err:
+        if border == "raise":
+            raise ValueError(f"box {k} {tuple(box)}: {err}") from None
+        warnings.warn(f"box {k} {tuple(box)}: {err}", stacklevel=3)
+        return None
+    p = outs[0] + np.array([cx0 - pad[1][0], cy0 - pad[0][0]], dtype=np.float64)
+    return p
+
+
+def _dilate(m: np.ndarray, r: int) -> np.ndarray:
+    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    return cv2.dilate(m.astype(np.uint8), k).astype(bool)
+
+
+def _erode(m: np.ndarray, r: int) -> np.ndarray:
+    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    return cv2.erode(m.astype(np.uint8), k).astype(bool)
+
+
+def _auto_candidates(img: np.ndarray, *, iterations: int, min_area: float, max_side: int = 640):
+    """Salient objects: GrabCut from the whole image minus a border band (at most
+    ``max_side`` px wide), then connected components that look like a solid object."""
+    H, W = img.shape[:2]
+    s = min(1.0, max_side / max(H, W))
+    small = img if s == 1.0 else cv2.resize(img, (max(16, round(W * s)), max(16, round(H * s))),
+                                              interpolation=cv2.INTER_AREA)
+    h, w = small.shape[:2]
+    band = max(6, int(round(0.03 * min(h, w))))
+    fg = _grabcut(small, None, (band, band, w - 2 * band, h - 2 * band), iterations)
+    fg = cv2.morphologyEx(fg.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(fg, connectivity=8)
+    cands, notes = [], []
+    area_min = max(min_area * s * s, 2e-3 * h * w)
+    for c in range(1, n):
+        x, y, bw, bh, area = stats[c]
+        if area < area_min:
+            continue
+        comp = lab == c
+        cnts, _ = cv2.findContours(comp.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+        hull = cv2.convexHull(np.concatenate(cnts))
+        solidity = area / max(cv2.contourArea(hull), 1.0)
+        box = (x / s, y / s, (x + bw - 1) / s, (y + bh - 1) / s)
+        where = f"x {box[0]:.0f}..{box[2]:.0f}, y {box[1]:.0f}..{box[3]:.0f}"
+        if x <= band or y <= band or x + bw >= w - band or y + bh >= h - band:
+            notes.append(f"a region at {where} reaches the image's border band (cut by the frame, or background)")
+            continue
+        if min(bw, bh) < 8 or solidity < 0.35:
+            notes.append(f"a region at {where} does not look like a solid object (solidity {solidity:.2f})")
+            continue
+        cands.append((area, comp, box))
+    cands.sort(key=lambda c: -c[0])
+    return cands, s, notes
+
+
+def outlines_from_image(
+    image,
+    boxes: Sequence[Sequence[float]] | None = None,
+    *,
+    min_area: float = 400.0,
+    smooth: float = 1.0,
+    border: str = "refuse",
+    refine: bool = True,
+    iterations: int = 5,
+) -> list[np.ndarray]:
+    """Sub-pixel outlines of the objects in a colour photograph.
+
+    Parameters
+    ----------
+    image : (H, W, 3) array
+        BGR as ``cv2.imread`` returns it: uint8 (or uint16), or float in [0, 1]; grey
+        (H, W) and BGRA are accepted.
+    boxes : sequence of (x0, y0, x1, y1), optional
+        One box per object, in pixels (top-left and bottom-right corners, inclusive),
+        enclosing the whole object with a margin of a few pixels.  Each object is
+        segmented by ``cv2.grabCut`` initialised with its box.  Without boxes the
+        objects are found automatically: GrabCut initialised with the whole image minus
+        a border band (3 % of the smaller side) as probable foreground, at most 640 px
+        wide; its connected regions that look like solid objects (area >= 0.2 % of the
+        image, solidity >= 0.35, clear of the border band) are then segmented again at
+        full resolution, each from its own region.
+    min_area : float
+        Smallest object kept, pixels^2.
+    smooth : float
+        Gaussian sigma (pixels) of the final level set (see :func:`outlines_from_mask`).
+    border : {"refuse", "cut", "raise"}
+        Objects touching the image border (see :func:`outlines_from_mask`).
+    refine : bool
+        Refine the GrabCut boundary on the image itself: near the boundary each pixel
+        is unmixed into local object and background colours, giving a soft mask whose
+        0.5 level set is the sub-pixel edge.  Without it the binary GrabCut mask is used.
+    iterations : int
+        GrabCut iterations.
+
+    Returns
+    -------
+    list of (N, 2) float64 arrays
+        One outline per object (conventions of :func:`outlines_from_mask`; pixel centres
+        at integer coordinates), in box order with boxes, largest first without.
+        Objects that cannot be segmented, that a box cuts or that touch the image border
+        are left out with a warning that says why.
+
+    Raises
+    ------
+    ValueError
+        Bad image or boxes, or no object found at all.
+    """
+    min_area, smooth = _check_options(min_area, smooth, border)
+    if not (isinstance(iterations, (int, np.integer)) and 1 <= int(iterations) <= 50):
+        raise ValueError(f"iterations must be an int between 1 and 50, got {iterations!r}")
+    img = _as_bgr8(image)
+    H, W = img.shape[:2]
+    out = []
+    if boxes is not None:
+        bxs = _check_boxes(boxes, (H, W))
+        for k, b in enumerate(bxs):
+            p = _object_from_box(img, b, k, iterations=int(iterations), min_area=min_area,
+                                 smooth=smooth, border=border, refine=refine)
+            if p is not None:
+                out.append(p)
+        if not out:
+            raise ValueError(
+                f"no object outline could be extracted from any of the {len(bxs)} boxes (see the "
+                "warnings); check that each box encloses one whole object with a small margin"
+            )
+        return out
+    cands, s, notes = _auto_candidates(img, iterations=int(iterations), min_area=min_area)
+    for note in notes:
+        warnings.warn(f"automatic detection: {note}; ignored", stacklevel=2)
+    if not cands:
+        raise ValueError(
+            "no object found in the image: automatic detection (GrabCut from the image minus a "
+            "border band) found no solid foreground region clear of the border"
+            + (f" ({len(notes)} region(s) ignored, see the warnings)" if notes else "")
+            + ". Pass boxes=[(x0, y0, x1, y1), ...] around the objects, or a mask to "
+            "outlines_from_mask"
+        )
+    for k, (_, comp, box) in enumerate(cands):
+        m = comp.astype(np.uint8)
+        if s != 1.0:
+            m = cv2.resize(m, (W, H), interpolation=cv2.INTER_NEAREST)
+        m = m.astype(bool)
+        r = max(2, int(round(2.0 / s)))
+        init = np.full((H, W), cv2.GC_BGD, np.uint8)
+        init[_dilate(m, 2 * r)] = cv2.GC_PR_BGD
+        init[m] = cv2.GC_PR_FGD
+        init[_erode(m, 2 * r)] = cv2.GC_FGD
+        ib = (max(0, int(box[0]) - 2 * r), max(0, int(box[1]) - 2 * r),
+              min(W - 1, int(math.ceil(box[2])) + 2 * r), min(H - 1, int(math.ceil(box[3])) + 2 * r))
+        p = _object_from_box(img, ib, k, iterations=int(iterations), min_area=min_area,
+                             smooth=smooth, border=border, refine=refine, init=init)
+        if p is not None:
+            out.append(p)
+    if not out:
+        raise ValueError(
+            "no object outline could be extracted (see the warnings); pass boxes around the "
+            "objects, or a mask to outlines_from_mask"
+        )
+    order = np.argsort([-_shoelace(p) for p in out], kind="stable")
+    return [out[i] for i in order]
