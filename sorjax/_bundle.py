@@ -20,7 +20,9 @@ aspect, IIb for a known aspect ratio) with a safe fallback when its omega is not
 positive definite.
 
 Uncertainty: at the optimum, ``Cov(y) = s^2 (J^T J)^-1`` with ``s^2 = |r|^2 / (VN - p)``,
-pushed to the pixel intrinsics ``(fu, fv, u0, v0)`` through the Jacobian of that map.
+pushed to the pixel intrinsics ``(fu, fv, u0, v0)`` through the Jacobian of that map;
+intrinsics the views do not determine at all get an infinite variance (see
+:func:`covariance`).
 """
 
 from __future__ import annotations
@@ -96,19 +98,45 @@ def solve(y0, problem: BundleProblem, max_steps: int = 200):
     return sol.value, sol.result, sol.stats["num_steps"], residuals(sol.value, problem)
 
 
+NULL_EIGENVALUE = 1e-12
+
+
 @jax.jit
 def covariance(y, problem: BundleProblem, T):
-    """Covariance of the pixel intrinsics ``(fu, fv, u0, v0)`` at ``y``:
-    ``G (s^2 (J^T J)^-1) G^T`` with ``G`` the Jacobian of the pixel intrinsics in ``y``."""
+    """Covariance of the pixel intrinsics ``(fu, fv, u0, v0)`` at ``y``; returns
+    ``(cov, s2)`` with ``s2 = |r|^2 / (VN - p)`` (normalised units^2).
+
+    The intrinsics' block of ``s^2 (J^T J)^-1`` is taken through the Schur complement
+    ``F = J_k^T J_k - J_k^T J_d (J_d^T J_d)^-1 J_d^T J_k`` (the information on the
+    intrinsics ``k`` once the vertices ``d`` are fitted), whose parameters
+    ``(log fu, log fv, u0, v0)`` are all of order one, so that its eigenvalues compare
+    directly.  A direction with eigenvalue below ``NULL_EIGENVALUE`` times the largest
+    is not determined by the views at all (e.g. the focal length when every ``v_x`` is
+    at infinity): the pixel intrinsics that move along it get an *infinite* variance
+    (their covariances with the others NaN) -- a pseudo-inverse would silently give
+    them zero variance instead."""
     flat, unravel = jax.flatten_util.ravel_pytree(y)
     J = jax.jacfwd(lambda f: residuals(unravel(f), problem))(flat)
     r = residuals(y, problem)
+    nk = y[0].shape[0]
     dof = jnp.maximum(jnp.sum(problem.weights) - flat.shape[0], 1)
     s2 = jnp.sum(r**2) / dof
-    cov_y = s2 * jnp.linalg.pinv(J.T @ J)
+    H = J.T @ J
+    Hkk, Hkd, Hdd = H[:nk, :nk], H[:nk, nk:], H[nk:, nk:]
+    F = Hkk - Hkd @ jnp.linalg.pinv(Hdd, hermitian=True) @ Hkd.T
+    lam, U = jnp.linalg.eigh(0.5 * (F + F.T))
+    null = lam <= NULL_EIGENVALUE * jnp.max(jnp.abs(lam))
+    cov_k = s2 * (U * jnp.where(null, 0.0, 1.0 / jnp.where(null, 1.0, lam))) @ U.T
 
-    G = jax.jacfwd(lambda f: _pixel_intrinsics(T, *unpack_intrinsics(unravel(f)[0], problem.aspect)))(flat)
-    return G @ cov_y @ G.T, s2
+    Gk = jax.jacfwd(lambda k: _pixel_intrinsics(T, *unpack_intrinsics(k, problem.aspect)))(y[0])
+    cov = Gk @ cov_k @ Gk.T
+    GU = Gk @ U  # (4, nk): each pixel intrinsic along each eigenvector
+    leak = jnp.sum(jnp.where(null[None, :], GU**2, 0.0), axis=1)
+    undetermined = leak > 1e-8 * jnp.sum(GU**2, axis=1)
+    bad = undetermined[:, None] | undetermined[None, :]
+    cov = jnp.where(bad, jnp.nan, cov)
+    cov = jnp.where(jnp.eye(4, dtype=bool) & bad, jnp.inf, cov)
+    return cov, s2
 
 
 def chart(v_seed: np.ndarray):

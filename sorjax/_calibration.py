@@ -17,7 +17,8 @@ from jaxtyping import Array, Float, Int
 
 from ._camera import intrinsics_matrix, normalising_transform, omega_vector_from_intrinsics, omega_matrix
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
-from ._bundle import covariance, fit_bundle, unpack_intrinsics, vertices
+from ._bundle import BundleProblem, chart, covariance, fit_bundle, pack_intrinsics, unpack_intrinsics, vertices
+from ._bundle import _setup as _bundle_setup
 from ._linear import method_i, method_ii
 from ._outline import DEFAULT_POINTS, as_outlines
 
@@ -25,7 +26,10 @@ METHODS = ("bundle", "I", "IIa", "IIb")
 
 
 class RESULTS(eqx.Enumeration):
-    """Result codes of a calibration (in the style of ``optimistix.RESULTS``)."""
+    """Result codes of a calibration (in the style of ``optimistix.RESULTS``).
+
+    ``Calibration.message`` is the code's text followed by the specifics of the case
+    (``Calibration.details``)."""
 
     successful = ""
     not_positive_definite = (
@@ -39,13 +43,23 @@ class RESULTS(eqx.Enumeration):
         "revolution, or the views may not determine the camera; inspect view_rms."
     )
     too_few_views = (
-        "Fewer than two views carry calibration information (conic outlines were dropped). "
-        "Add views of surfaces of revolution whose profile is visible, from other positions."
+        "Fewer than two views carry calibration information (views whose outline is a "
+        "conic or is not symmetric are dropped). Add views of surfaces of revolution "
+        "whose profile is visible, from other positions."
     )
     degenerate = (
         "The views do not determine the intrinsics with this method (e.g. fewer than two "
-        "views with a finite vanishing point, or parallel constraint lines). Add views "
-        "with the object placed elsewhere in the image or tilted differently."
+        "views with a finite vanishing point, parallel constraint lines, or a direction "
+        "of the intrinsics the views leave free). Add views with the object placed "
+        "elsewhere in the image or tilted differently."
+    )
+    only_principal_point = (
+        "The views determine the principal point but not the focal length: in every view "
+        "the camera looked (almost) straight at the object's axis, so the vanishing point "
+        "v_x is at infinity and the imaged axis l_s passes through the principal point "
+        "(paper, Section 6). K holds the principal point (K[0, 2], K[1, 2]; "
+        "Calibration.principal_point) and NaN focal lengths. Add a view with the object "
+        "away from the image centre, or seen from higher or lower."
     )
 
 
@@ -74,8 +88,13 @@ class Calibration(eqx.Module):
         method: "I", "IIa", "IIb" or "bundle".
         aspect_ratio: the known ``fu / fv`` imposed, or None when it was estimated
             (always 1 for "I"/"IIb" without one).
-        used: indices of the views used (conic outlines are dropped with a warning);
-            ``view_rms``, ``v_x`` and ``l_s`` refer to these views, ``homologies`` to all.
+        used: indices of the views used (conic outlines and outlines that are not
+            symmetric are dropped with a warning); ``view_rms``, ``v_x`` and ``l_s``
+            refer to these views, ``homologies`` to all.
+        details: what is specific to this result (empty on plain success): which
+            views were dropped, which intrinsics are or are not determined, what to add.
+        dropped: ``(view index, reason)`` for each view left out.
+        notes: every warning :func:`calibrate` issued for this calibration, in order.
     """
 
     K: Float[Array, "3 3"]
@@ -91,6 +110,9 @@ class Calibration(eqx.Module):
     method: str = eqx.field(static=True)
     aspect_ratio: float | None = eqx.field(static=True, default=None)
     used: tuple[int, ...] = eqx.field(static=True, default=())
+    details: str = eqx.field(static=True, default="")
+    dropped: tuple[tuple[int, str], ...] = eqx.field(static=True, default=())
+    notes: tuple[str, ...] = eqx.field(static=True, default=())
 
     @property
     def std(self) -> np.ndarray:
@@ -114,12 +136,18 @@ class Calibration(eqx.Module):
         return float(self.K[1, 2])
 
     @property
+    def principal_point(self) -> np.ndarray:
+        """``(u0, v0)`` in pixels (also when only the principal point is determined)."""
+        return np.array([self.u0, self.v0])
+
+    @property
     def success(self) -> bool:
         return bool(self.result == RESULTS.successful)
 
     @property
     def message(self) -> str:
-        return RESULTS[self.result]
+        text = RESULTS[self.result]
+        return f"{text} {self.details}".strip() if self.details else text
 
     def __array__(self, dtype=None, copy=None):
         return np.asarray(self.K, dtype=dtype)
@@ -144,6 +172,8 @@ def _linear_once(homologies, method: str, T: np.ndarray, a: float, weights=None)
     A = np.diag([1.0 / a, 1.0, 1.0])
     v = np.stack([np.asarray(h.v_x) for h in homologies]) @ (T @ A).T
     l = np.stack([np.asarray(h.l_s) for h in homologies]) @ np.linalg.inv(T @ A)
+    if method == "I":  # Method I has no l_x for a view whose v_x is at infinity: leave it out
+        v[[i for i, h in enumerate(homologies) if h.v_x_at_infinity], 2] = 0.0
     v, l = jnp.asarray(v), jnp.asarray(l)
     if method == "I":
         fu, fv, u0, v0, ok = method_i(v, l)
@@ -194,11 +224,14 @@ def linear_calibration(homologies, method: str, T: np.ndarray, aspect_ratio=None
     return K, omega, code
 
 
-def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples, all_homologies, used) -> Calibration:
+def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples):
     """Seed the 2V+4 (or 2V+3) bundle with every linear method that succeeds (IIa,
     IIb and I; with a known aspect ratio their estimates are projected onto it) and
     keep the solution of lowest cost: one linear seed can be far off when a view is
-    weak.  With no positive-definite linear seed, a spread of plausible cameras."""
+    weak.  With no positive-definite linear seed, a spread of plausible cameras.
+
+    Returns ``(K, omega, code, cov, cost, view_rms, steps, v_x, l_s, s_px)``; ``K`` is
+    the raw estimate (not yet masked on failure), ``s_px`` the residual standard error."""
     scale = 1.0 / T[0, 0]
     a = 1.0 if aspect_ratio is None else float(aspect_ratio)
     seeds = []
@@ -217,7 +250,7 @@ def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples, all_homolo
     pts_n = np.stack([np.asarray(o.points) @ T[:2, :2].T + T[:2, 2] for o in outs])
     v_n = np.stack([T @ np.asarray(h.v_x) for h in homologies])
     y, res, steps, r, problem = fit_bundle(pts_n, v_n, seeds, aspect_ratio, n_samples)
-    cov, _ = covariance(y, problem, jnp.asarray(T))
+    cov, s2 = covariance(y, problem, jnp.asarray(T))
     fu, fv, u0, v0 = unpack_intrinsics(y[0], problem.aspect)
     Kn = intrinsics_matrix(fu, fv, u0, v0)
     K = jnp.asarray(np.linalg.inv(T)) @ Kn
@@ -227,13 +260,205 @@ def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples, all_homolo
     rv = r.reshape(len(outs), -1) * scale
     view_rms = jnp.sqrt(jnp.mean(rv**2, axis=1))
     cost = jnp.sum(rv**2)
-    K = jnp.where(ok, K, jnp.nan)
     vx = vertices(y[1], problem.v0, problem.E) @ jnp.asarray(np.linalg.inv(T)).T
     vx = vx / jnp.linalg.norm(vx, axis=1, keepdims=True)
     ls = vx @ omega
     ls = ls / jnp.linalg.norm(ls[:, :2], axis=1, keepdims=True)
-    a = None if aspect_ratio is None else float(aspect_ratio)
-    return Calibration(K, omega, all_homologies, code, cov, cost, view_rms, steps, vx, ls, "bundle", a, used)
+    return K, omega, code, cov, cost, view_rms, steps, vx, ls, float(np.sqrt(s2)) * scale
+
+
+def _linearised_covariance(outs, homologies, K, T, aspect_ratio, n_samples):
+    """Covariance of ``(fu, fv, u0, v0)`` per px^2 of symmetry residual, for a linear
+    method's estimate ``K``: the bundle's linearisation (:func:`sorjax._bundle.covariance`)
+    at ``K`` with the per-view fits' vertices.  It measures how well these views
+    determine the intrinsics whatever the estimator (infinite where they don't)."""
+    scale = 1.0 / T[0, 0]
+    pts_n = jnp.asarray(np.stack([np.asarray(o.points) @ T[:2, :2].T + T[:2, 2] for o in outs]))
+    fields, samples, weights = _bundle_setup(pts_n, n_samples)
+    v0, E = chart(np.stack([T @ np.asarray(h.v_x) for h in homologies]))
+    problem = BundleProblem(
+        fields, samples, weights, jnp.asarray(v0), jnp.asarray(E),
+        jnp.asarray(np.nan if aspect_ratio is None else float(aspect_ratio)),
+    )
+    Kn = T @ np.asarray(K)
+    k = pack_intrinsics(*(jnp.asarray(x) for x in (Kn[0, 0], Kn[1, 1], Kn[0, 2], Kn[1, 2])), aspect_ratio is None)
+    cov, s2 = covariance((k, jnp.zeros((len(outs), 2))), problem, jnp.asarray(T))
+    return np.asarray(cov) / (max(float(s2), 1e-300) * scale**2)
+
+
+# ------------------------------------------------------------ degenerate geometry
+
+# A view is dropped as "not a surface of revolution" when its per-view symmetry
+# residual (eq. 20, RMS) exceeds ASYMMETRY_PX *and* ASYMMETRY_REL of the outline's
+# RMS radius.  Measured (experiments/degenerate.py): exact outlines of random SORs fit
+# to ~1e-5 px; with the paper's noise of sigma = 2 px the residual stayed below 0.7 px,
+# with i.i.d. Gaussian noise of 2 px below 1.8 px; random asymmetric blobs gave
+# 0.1 to 10 px, so only clearly asymmetric outlines are caught (a mild asymmetry is
+# indistinguishable from noise by this residual).  Between WARN_ASYMMETRY_PX and the
+# threshold the view is kept with a warning.
+ASYMMETRY_PX = 2.0
+ASYMMETRY_REL = 0.01
+WARN_ASYMMETRY_PX = 1.0
+# An intrinsic is "not determined" when its standard deviation (the covariance at the
+# estimate, scaled by the actual residual) is infinite or above UNDETERMINED times the
+# focal length (for the principal point: times the outlines' RMS radius when the focal
+# length itself is not determined): a 3-sigma interval reaching zero.
+UNDETERMINED = 1.0 / 3.0
+# Weak geometry: warn when the relative standard deviation of a focal length exceeds
+# WEAK_REL_STD, the covariance scaled by the residual but at least RESIDUAL_FLOOR_PX
+# (about the accuracy of good sub-pixel outlines), so that a configuration that only
+# noise-free outlines could calibrate is flagged too.
+WEAK_REL_STD = 0.05
+RESIDUAL_FLOOR_PX = 0.1
+# Advice thresholds (which extra view would help).
+PARALLEL_AXES_DEG = 10.0
+NEAR_AXIS_DEG = 10.0
+SMALL_OUTLINE_RAD = 0.15
+_NAMES = ("fu", "fv", "u0", "v0")
+
+
+def _outline_radius(outline) -> float:
+    p = np.asarray(outline.points)
+    return float(np.sqrt(np.mean(np.sum((p - p.mean(0)) ** 2, axis=1))))
+
+
+def _axis_spread_deg(ls: np.ndarray) -> float:
+    """Largest angle (degrees, 0..90) between the directions of the imaged axes."""
+    t = np.arctan2(ls[:, 1], ls[:, 0])
+    d = np.abs(t[:, None] - t[None, :]) % np.pi
+    return float(np.degrees(np.max(np.minimum(d, np.pi - d))))
+
+
+def _view_angles_deg(K: np.ndarray, vx: np.ndarray) -> np.ndarray:
+    """Per view, the angle (degrees) between the optical axis and the plane through the
+    revolution axis and the camera centre (theta of the paper's eq. 37): 0 when v_x
+    is at infinity."""
+    n = np.linalg.solve(K, vx.T).T
+    return np.degrees(np.arcsin(np.clip(np.abs(n[:, 2]) / np.linalg.norm(n, axis=1), 0.0, 1.0)))
+
+
+def _advice(K, vx, ls, outs, free_aspect: bool, aspect_weak: bool) -> list[str]:
+    """What kind of extra view would help, from the geometry of the views (``K`` the
+    raw estimate, used only for the angles; it may be poor when it is not determined)."""
+    tips = []
+    spread = _axis_spread_deg(np.asarray(ls))
+    if np.all(np.isfinite(K)) and K[0, 0] > 0 and K[1, 1] > 0:
+        theta = _view_angles_deg(np.asarray(K), np.asarray(vx))
+        if np.max(theta) < NEAR_AXIS_DEG:
+            tips.append(
+                f"in every view the camera looks almost straight at the object's axis (the plane "
+                f"through the axis and the camera makes at most {np.max(theta):.1f} deg with the "
+                "optical axis, so v_x is far away and l_s passes near the principal point): add a "
+                "view with the object near an edge or corner of the image"
+            )
+        f = float(np.sqrt(K[0, 0] * K[1, 1]))
+        size = max(float(np.hypot(*np.ptp(np.asarray(o.points), axis=0))) for o in outs) / f
+        if size < SMALL_OUTLINE_RAD:
+            tips.append(
+                f"every outline is small for this focal length (at most {np.degrees(size):.1f} deg "
+                "across: weak perspective): add a view with the object closer to the camera"
+            )
+    if spread < PARALLEL_AXES_DEG:
+        tips.append(
+            f"all imaged axes are within {spread:.1f} deg of each other: add a view with the object "
+            "tilted (or the camera rolled) so that its axis appears at another angle in the image"
+        )
+    if not tips:
+        tips.append(
+            "add a view with the object off the image centre and seen from above or below "
+            "(stronger perspective), or at a different place in the image"
+        )
+    if free_aspect and aspect_weak:
+        tips.append("if the pixels are square, pass aspect_ratio=1.0 (one unknown less)")
+    return tips
+
+
+def _ls_intersection(ls: np.ndarray):
+    """Least-squares intersection of lines (V, 3) (``a^2 + b^2 = 1``): ``(point, cov,
+    spread_deg)``; ``cov`` is NaN with fewer than 3 lines, ``point`` NaN when they
+    are (nearly) parallel."""
+    A, b = ls[:, :2], -ls[:, 2]
+    N = A.T @ A
+    spread = _axis_spread_deg(ls)
+    if spread < 1.0:
+        return np.full(2, np.nan), np.full((2, 2), np.nan), spread
+    x = np.linalg.solve(N, A.T @ b)
+    if len(ls) >= 3:
+        s2 = float(np.sum((A @ x - b) ** 2)) / (len(ls) - 2)
+        cov = s2 * np.linalg.inv(N)
+    else:
+        cov = np.full((2, 2), np.nan)
+    return x, cov, spread
+
+
+def _fmt_std(x, sd):
+    return f"{x:.1f} +- {sd:.2g}" if np.isfinite(sd) else f"{x:.1f} +- inf"
+
+
+def _assess(K, cov_unit, s_px, outs, vx, ls, free_aspect: bool):
+    """Which intrinsics the views determine.  Returns ``(determined (4,) bool, std (4,),
+    weak_note or None, advice)`` for the raw estimate ``K`` (pixels), the covariance
+    per px^2 of residual ``cov_unit`` and the residual standard error ``s_px``."""
+    K = np.asarray(K)
+    est = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
+    var = np.diag(np.asarray(cov_unit))
+    std = np.where(np.isfinite(var), np.sqrt(np.abs(var)), np.inf) * s_px
+    radius = np.sqrt(np.mean([_outline_radius(o) ** 2 for o in outs]))
+    focal_ok = np.isfinite(std[:2]) & (std[:2] <= UNDETERMINED * np.abs(est[:2]))
+    ref = np.sqrt(abs(est[0] * est[1])) if focal_ok.all() else radius
+    pp_ok = np.isfinite(std[2:]) & (std[2:] <= UNDETERMINED * ref)
+    determined = np.concatenate([focal_ok, pp_ok])
+    weak = None
+    s_floor = max(s_px, RESIDUAL_FLOOR_PX)
+    rel_floor = std[:2] / max(s_px, 1e-300) * s_floor / np.abs(est[:2])
+    aspect_weak = free_aspect and not determined.all()
+    if determined.all() and np.max(rel_floor) > WEAK_REL_STD:
+        weak = float(np.max(rel_floor))
+        if free_aspect:  # relative std of fu / fv
+            c = np.asarray(cov_unit)
+            q = c[0, 0] / est[0] ** 2 + c[1, 1] / est[1] ** 2 - 2 * c[0, 1] / (est[0] * est[1])
+            aspect_weak = bool(np.sqrt(max(q, 0.0)) * s_floor > WEAK_REL_STD)
+    advice = _advice(K, vx, ls, outs, free_aspect, aspect_weak)
+    return determined, std, weak, advice
+
+
+def _nan_calibration(homologies, result, method, a, used, details, dropped, notes, K=None, cov=None, rms=None,
+                     vx=None, ls=None):
+    nan3, nan4 = jnp.full((3, 3), jnp.nan), jnp.full((4, 4), jnp.nan)
+    return Calibration(
+        nan3 if K is None else jnp.asarray(K), nan3, homologies, result, nan4 if cov is None else jnp.asarray(cov),
+        jnp.asarray(jnp.nan), jnp.zeros((0,)) if rms is None else jnp.asarray(rms), jnp.asarray(0),
+        jnp.zeros((0, 3)) if vx is None else jnp.asarray(vx), jnp.zeros((0, 3)) if ls is None else jnp.asarray(ls),
+        method, a, tuple(used), details, tuple(dropped), tuple(notes),
+    )
+
+
+def _check_options(n_samples, n_points, homologies, n_views):
+    for name, val, lo in (("n_samples", n_samples, 10), ("n_points", n_points, 64)):
+        if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < lo:
+            raise ValueError(f"{name} must be an integer >= {lo}; got {val!r}.")
+    if n_samples > n_points:
+        raise ValueError(f"n_samples ({n_samples}) must not exceed n_points ({n_points}).")
+    if homologies is not None:
+        try:
+            homologies = tuple(homologies)
+        except TypeError:
+            raise ValueError(
+                f"homologies must be a sequence of sorjax.Homology (one per outline, from "
+                f"sorjax.fit_homology); got {type(homologies).__name__}."
+            ) from None
+        if len(homologies) != n_views:
+            raise ValueError(
+                f"got {len(homologies)} homologies for {n_views} outlines; pass one "
+                "sorjax.fit_homology result per outline, in the same order (or none)."
+            )
+        for i, h in enumerate(homologies):
+            if not isinstance(h, Homology):
+                raise ValueError(
+                    f"homologies[{i}] is a {type(h).__name__}, not a sorjax.Homology; "
+                    "pass the results of sorjax.fit_homology (or homologies=None)."
+                )
+    return homologies
 
 
 def calibrate(
@@ -264,6 +489,26 @@ def calibrate(
 
     Returns:
         :class:`Calibration` with ``K`` (pixels) and a result code.
+
+    Degenerate input is detected, never turned into a K:
+
+    * views whose outline is a conic (a sphere) or is not symmetric (RMS symmetry
+      residual above ``ASYMMETRY_PX`` px and ``ASYMMETRY_REL`` of its radius) are
+      dropped with a warning naming them (``Calibration.dropped``); fewer than two
+      left gives ``RESULTS.too_few_views``;
+    * when every view's ``v_x`` is at infinity (:attr:`Homology.v_x_at_infinity`),
+      only the principal point is estimable: ``RESULTS.only_principal_point``, with
+      the least-squares intersection of the ``l_s`` in ``K[:2, 2]`` and NaN focal
+      lengths;
+    * otherwise the estimate's covariance (the bundle's; for the linear methods the
+      bundle's linearisation at their estimate) says which intrinsics the views
+      determine: one with an infinite standard deviation or one above a third of the
+      focal length is reported NaN, with ``RESULTS.only_principal_point`` (both focal
+      lengths) or ``RESULTS.degenerate``; ``Calibration.details`` says which and what
+      view to add;
+    * a successful calibration whose focal length has a relative standard deviation
+      above ``WEAK_REL_STD`` (5 %; residual taken as at least 0.1 px) gives a warning
+      saying what kind of extra view would help.
     """
     _check_method(method, aspect_ratio)
     outs = as_outlines(outlines, n_points)
@@ -271,54 +516,141 @@ def calibrate(
         raise ValueError(
             f"calibration needs at least two outlines (views) of surfaces of revolution; got "
             f"{len(outs)}. One outline gives only its own axis l_s and vanishing point v_x "
-            "(use sorjax.fit_homology), i.e. two of the four intrinsics' constraints."
+            "(use sorjax.fit_homology): two constraints on the four intrinsics (fu, fv, u0, v0), "
+            "which leaves the camera undetermined. Add an outline from another view (the object "
+            "moved or tilted, or another object)."
         )
+    homologies = _check_options(n_samples, n_points, homologies, len(outs))
+    notes: list[str] = []
+
+    def note(msg):
+        notes.append(msg)
+        warnings.warn(msg, stacklevel=3)
+
     if homologies is None:
         homologies = tuple(fit_homology(o, n_samples=n_samples, n_points=n_points) for o in outs)
-    elif len(homologies) != len(outs):
-        raise ValueError(f"got {len(homologies)} homologies for {len(outs)} outlines.")
     for i, h in enumerate(homologies):
         if not bool(h.converged):
-            warnings.warn(f"view {i}: the homology fit did not converge (rms {float(h.rms):.3g} px).", stacklevel=2)
-    used = []
+            note(f"view {i}: the homology fit did not converge (rms {float(h.rms):.3g} px).")
+    used, dropped = [], []
     for i, h in enumerate(homologies):
+        rms, radius = float(h.rms), _outline_radius(outs[i])
         if h.is_conic:
-            warnings.warn(
+            note(
                 f"view {i}: the outline is a conic to within {float(h.conic_rms):.2g} px (its symmetry "
-                f"residual is {float(h.rms):.2g} px), like a sphere or a bowl seen from above showing "
+                f"residual is {rms:.2g} px), like a sphere or a bowl seen from above showing "
                 "only its rim: infinitely many homologies fit it, so it carries no calibration "
-                "information (paper, Section 6). Dropped; use views where the body's profile shows.",
-                stacklevel=2,
+                "information (paper, Section 6). Dropped; use views where the body's profile shows."
             )
+            dropped.append((i, "conic outline"))
+        elif not np.isfinite(rms) or (rms > ASYMMETRY_PX and rms > ASYMMETRY_REL * radius):
+            note(
+                f"view {i}: the outline is not symmetric: its best harmonic homology leaves an RMS "
+                f"symmetry residual of {rms:.3g} px (a surface of revolution with up to 2 px of noise "
+                f"stays below about {ASYMMETRY_PX:g} px), so it is not the outline of a surface of "
+                "revolution (or it is broken, occluded or merged with something else). Dropped; "
+                "check the segmentation of this view."
+            )
+            dropped.append((i, f"not symmetric (rms {rms:.3g} px)"))
         else:
+            if rms > WARN_ASYMMETRY_PX:
+                note(
+                    f"view {i}: high symmetry residual ({rms:.3g} px): a noisy outline, or not quite a "
+                    "surface of revolution; kept. Check its segmentation."
+                )
             used.append(i)
     homologies = tuple(homologies)
     a = None if method in ("IIa",) or (method == "bundle" and aspect_ratio is None) else (
         1.0 if aspect_ratio is None else float(aspect_ratio)
     )
-    if len(used) < 2:
-        nan3, nan4 = jnp.full((3, 3), jnp.nan), jnp.full((4, 4), jnp.nan)
-        cal = Calibration(
-            nan3, nan3, homologies, RESULTS.too_few_views, nan4, jnp.asarray(jnp.nan),
-            jnp.zeros((0,)), jnp.asarray(0), jnp.zeros((0, 3)), jnp.zeros((0, 3)), method, a, tuple(used),
-        )
-        if throw:
+    free_aspect = a is None
+
+    def finish(cal):
+        if throw and not cal.success:
             raise CalibrationError(cal.message)
         return cal
+
+    if len(used) < 2:
+        why = "; ".join(f"view {i}: {r}" for i, r in dropped)
+        details = (
+            f"{len(outs)} views given, {len(used)} usable ({why}). A single view gives only two "
+            "constraints on the four intrinsics."
+        )
+        return finish(_nan_calibration(homologies, RESULTS.too_few_views, method, a, used, details, dropped, notes))
     outs_u = [outs[i] for i in used]
     homs_u = tuple(homologies[i] for i in used)
+    rms_u = jnp.stack([h.rms for h in homs_u])
+    vx_h = np.stack([np.asarray(h.v_x) for h in homs_u])
+    ls_h = np.stack([np.asarray(h.l_s) for h in homs_u])
+
+    # every v_x at infinity: only the principal point (where the l_s meet) is estimable
+    if all(h.v_x_at_infinity for h in homs_u):
+        pp, cov_pp, spread = _ls_intersection(ls_h)
+        vs = ", ".join(str(i) for i in used)
+        if not np.all(np.isfinite(pp)):
+            details = (
+                f"Every view's v_x is at infinity (views {vs}) and their imaged axes are parallel "
+                f"(within {spread:.2g} deg), so not even the principal point is determined. Add a view "
+                "with the object away from the image centre."
+            )
+            return finish(_nan_calibration(homologies, RESULTS.degenerate, method, a, used, details, dropped, notes,
+                                           rms=rms_u, vx=vx_h, ls=ls_h))
+        K = np.array([[np.nan, 0.0, pp[0]], [0.0, np.nan, pp[1]], [0.0, 0.0, 1.0]])
+        cov = np.full((4, 4), np.nan)
+        cov[0, 0] = cov[1, 1] = np.inf
+        cov[2:, 2:] = cov_pp
+        sd = np.sqrt(np.diag(cov_pp))
+        details = (
+            f"Every view's v_x is at infinity (views {vs}): the imaged axes meet at the principal "
+            f"point ({_fmt_std(pp[0], sd[0])}, {_fmt_std(pp[1], sd[1])}) px; the focal length is not "
+            "determined."
+        )
+        return finish(_nan_calibration(homologies, RESULTS.only_principal_point, method, a, used, details, dropped,
+                                       notes, K=K, cov=cov, rms=rms_u, vx=vx_h, ls=ls_h))
+
     T = normalising_transform(np.concatenate([np.asarray(o.points) for o in outs_u]))
     if method == "bundle":
-        cal = _bundle_calibration(outs_u, homs_u, T, aspect_ratio, n_samples, homologies, tuple(used))
+        K, omega, code, cov, cost, view_rms, steps, vx, ls, s_px = _bundle_calibration(
+            outs_u, homs_u, T, aspect_ratio, n_samples
+        )
+        cov_unit = np.asarray(cov) / max(s_px, 1e-300) ** 2
     else:
         K, omega, code = linear_calibration(homs_u, method, T, aspect_ratio)
-        nan = jnp.full((4, 4), jnp.nan)
-        rms = jnp.stack([h.rms for h in homs_u])
-        vx = jnp.stack([h.v_x for h in homs_u])
-        ls = jnp.stack([h.l_s for h in homs_u])
-        cal = Calibration(
-            K, omega, homologies, code, nan, jnp.asarray(jnp.nan), rms, jnp.asarray(0), vx, ls, method, a, tuple(used)
-        )
-    if throw and not cal.success:
-        raise CalibrationError(cal.message)
-    return cal
+        cov = jnp.full((4, 4), jnp.nan)
+        cost, view_rms, steps, vx, ls = jnp.asarray(jnp.nan), rms_u, jnp.asarray(0), jnp.asarray(vx_h), jnp.asarray(ls_h)
+        s_px = float(np.sqrt(np.mean(np.asarray(rms_u) ** 2)))
+        cov_unit = None
+        if bool(code == RESULTS.successful) and np.all(np.isfinite(np.asarray(K))):
+            cov_unit = _linearised_covariance(outs_u, homs_u, K, T, a, n_samples)
+
+    details = ""
+    K_np = np.asarray(K)
+    if cov_unit is not None and np.all(np.isfinite(K_np)) and K_np[0, 0] > 0 and K_np[1, 1] > 0:
+        determined, std, weak, advice = _assess(K_np, cov_unit, s_px, outs_u, np.asarray(vx), np.asarray(ls), free_aspect)
+        est = [K_np[0, 0], K_np[1, 1], K_np[0, 2], K_np[1, 2]]
+        if not determined.all():
+            code = RESULTS.only_principal_point if (not determined[:2].any() and determined[2:].all()) else RESULTS.degenerate
+            det = ", ".join(f"{n} = {_fmt_std(x, sd)} px" for n, x, sd, d in zip(_NAMES, est, std, determined) if d)
+            und = ", ".join(f"{n} ({_fmt_std(x, sd)} px)" for n, x, sd, d in zip(_NAMES, est, std, determined) if not d)
+            details = (
+                f"Not determined by these views: {und}"
+                + (f"; determined: {det}" if det else "")
+                + ". To fix it: " + "; ".join(advice) + "."
+            )
+            mask = np.array([[not determined[0], False, not determined[2]], [False, not determined[1], not determined[3]],
+                             [False, False, False]])
+            K = jnp.asarray(np.where(mask, np.nan, K_np))
+        elif weak is not None and bool(code == RESULTS.successful):
+            note(
+                f"weak geometry: the focal length is uncertain by {100 * weak:.3g} % (1 sigma, for a "
+                f"symmetry residual of {max(s_px, RESIDUAL_FLOOR_PX):.2g} px): " + "; ".join(advice) + "."
+            )
+    if not bool(code == RESULTS.successful):
+        omega = jnp.full((3, 3), jnp.nan)
+        if not details:  # no analysis of what is determined: nothing is reported
+            K = jnp.full((3, 3), jnp.nan)
+    cal = Calibration(
+        K, omega, homologies, code, jnp.asarray(cov), jnp.asarray(cost), view_rms, jnp.asarray(steps), jnp.asarray(vx),
+        jnp.asarray(ls), method, a, tuple(used), details, tuple(dropped), tuple(notes),
+    )
+    return finish(cal)

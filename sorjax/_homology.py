@@ -54,6 +54,7 @@ from ._field import DistanceField, curve_points, make_field, sample_weights, sig
 from ._outline import DEFAULT_POINTS, Outline, make_outline
 
 DEFAULT_SAMPLES = 100
+INFINITY_Z = 3.0
 CONIC_RATIO = 1.5
 CONIC_FLOOR_PX = 1e-3
 _GRID_DIRECTIONS = 48
@@ -76,6 +77,11 @@ class Homology(eqx.Module):
             conic.  A conic outline (a sphere, or a bowl seen from above showing only
             its rim) is symmetric under infinitely many homologies and carries no
             calibration information (the paper's Section 6): see :attr:`is_conic`.
+        infinity_z: how many standard errors ``v_x`` lies from the line at infinity:
+            ``|v_3| / std(v_3)`` in the fit's normalised coordinates, the standard
+            error from the fit's Jacobian and its residual (first order; affine
+            invariant).  See :attr:`v_x_at_infinity`.  None for homologies built by
+            hand.
     """
 
     l_s: Float[Array, "3"]
@@ -86,6 +92,19 @@ class Homology(eqx.Module):
     converged: Bool[Array, ""]
     steps: Int[Array, ""]
     conic_rms: Float[Array, ""]
+    infinity_z: Float[Array, ""] | None = None
+
+    @property
+    def v_x_at_infinity(self) -> bool:
+        """``v_x`` is at infinity as far as this outline can tell: within
+        ``INFINITY_Z`` (3) standard errors of the line at infinity, or so far away
+        (``|v_3| < 1e-9`` of the unit vertex in pixels) that no noise-free fit could
+        place it better.  The camera then looks straight at the revolution axis (the
+        outline has skew or mirror symmetry; paper, Section 6): the view constrains
+        the principal point (it lies on ``l_s``) but not the focal length."""
+        if abs(float(self.v_x[2])) < 1e-9:
+            return True
+        return self.infinity_z is not None and bool(self.infinity_z < INFINITY_Z)
 
     @property
     def is_conic(self) -> bool:
@@ -324,6 +343,24 @@ def _refine_candidates(field, samples, weights, cands, max_steps: int = 100):
     return out[0], out[1], float(out[2]), out[3], out[4] + steps0
 
 
+@jax.jit
+def _infinity_z(field, samples, weights, v, l, cost):
+    """``|v_3| / std(v_3)`` for the fitted ``(v, l)`` (normalised coordinates): the
+    Gauss-Newton covariance ``s^2 (J^T J)^-1`` of eq. 20's parameters in a chart
+    centred on the solution, ``s^2 = cost / (N - 4)``."""
+    v = v / jnp.linalg.norm(v)
+    l = l / jnp.linalg.norm(l[:2])
+    p = jnp.stack([jnp.arctan2(l[1], l[0]), -l[2], 0.0, 0.0])
+    e1 = jnp.cross(v, jnp.eye(3)[jnp.argmin(jnp.abs(v))])
+    e1 = e1 / jnp.linalg.norm(e1)
+    E = jnp.stack([e1, jnp.cross(v, e1)], axis=1)
+    J = jax.jacfwd(_residuals)(p, (field, samples, weights, v, E))
+    s2 = cost / jnp.maximum(jnp.sum(weights) - 4.0, 1.0)
+    cov = s2 * jnp.linalg.pinv(J.T @ J, hermitian=True)
+    var3 = E[2] @ cov[2:, 2:] @ E[2]
+    return jnp.abs(v[2]) / jnp.sqrt(jnp.maximum(var3, 1e-300))
+
+
 def fit_conic(points_n: np.ndarray):
     """Algebraic least-squares conic of points (normalised coordinates): the SVD null
     vector of ``[x^2, xy, y^2, x, y, 1]``.  Returns ``(C, rms)``: the symmetric 3x3
@@ -366,7 +403,7 @@ def conic_candidates(points_n: np.ndarray, n_dir: int = 12):
     return out
 
 
-def _to_pixels(T: np.ndarray, v, l, cost, ok, steps, scale, n_samples, conic) -> Homology:
+def _to_pixels(T: np.ndarray, v, l, cost, ok, steps, scale, n_samples, conic, z=None) -> Homology:
     v_pix = np.linalg.solve(T, np.asarray(v))
     v_pix = v_pix / np.linalg.norm(v_pix)
     l_pix = T.T @ np.asarray(l)
@@ -382,6 +419,7 @@ def _to_pixels(T: np.ndarray, v, l, cost, ok, steps, scale, n_samples, conic) ->
         converged=jnp.asarray(ok),
         steps=jnp.asarray(steps),
         conic_rms=jnp.asarray(conic * scale),
+        infinity_z=None if z is None else jnp.asarray(z),
     )
 
 
@@ -425,4 +463,5 @@ def fit_homology(
     else:
         cands = bitangent_candidates(pn) + mirror_candidates(pn, samples) + conic_candidates(pn)
     v, l, cost, ok, steps = _refine_candidates(field, samples, weights, cands, max_steps=max_steps)
-    return _to_pixels(T, v, l, cost, ok, steps, scale, float(jnp.sum(weights)), conic_rms(pn))
+    z = _infinity_z(field, samples, weights, jnp.asarray(v), jnp.asarray(l), jnp.asarray(cost))
+    return _to_pixels(T, v, l, cost, ok, steps, scale, float(jnp.sum(weights)), conic_rms(pn), z)

@@ -21,6 +21,7 @@ from jaxtyping import Array, Float
 
 DEFAULT_POINTS = 2048
 MIN_POINTS = 10
+MIN_EXTENT_PX = 10.0
 
 
 class Outline(eqx.Module):
@@ -77,10 +78,17 @@ def validate_points(points, *, name: str = "outline") -> np.ndarray:
     """Check a user's outline and return it as a clean (N, 2) float64 numpy array.
 
     Raises ValueError for: wrong shape or dtype, NaN/inf, fewer than 10 distinct
-    points, an open curve, zero area, a self-intersecting curve.
+    points, a curve smaller than 10 px, an open curve, a point visited twice (a curve
+    that touches itself or is traced more than once), a self-intersecting curve, zero
+    area.
     """
     if isinstance(points, Outline):
         return np.asarray(points.points, dtype=np.float64)
+    if points is None or isinstance(points, (str, bytes, dict)) or np.isscalar(points):
+        raise ValueError(
+            f"{name}: expected an (N, 2) array of pixel coordinates, got {type(points).__name__} "
+            f"{points!r:.40}. Pass one (x, y) point per row (load files first, e.g. with np.loadtxt)."
+        )
     try:
         arr = np.asarray(points)
     except Exception as e:  # ragged lists and the like
@@ -115,13 +123,33 @@ def validate_points(points, *, name: str = "outline") -> np.ndarray:
     # drop consecutive duplicates and a closing repeat of the first point
     keep = np.ones(len(arr), bool)
     keep[1:] = np.any(np.diff(arr, axis=0) != 0, axis=1)
+    rows = np.nonzero(keep)[0]  # the user's row of each kept point
     arr = arr[keep]
     if len(arr) > 1 and np.all(arr[-1] == arr[0]):
-        arr = arr[:-1]
+        arr, rows = arr[:-1], rows[:-1]
     if len(arr) < MIN_POINTS:
         raise ValueError(
             f"{name}: has {len(arr)} distinct points; at least {MIN_POINTS} are needed. "
             "Pass a densely sampled outline (e.g. every pixel of the contour)."
+        )
+    extent = float(np.max(np.ptp(arr, axis=0)))
+    if extent < MIN_EXTENT_PX:
+        raise ValueError(
+            f"{name}: spans only {extent:.3g} px. Outlines must be in pixel coordinates (not "
+            f"normalised ones), and an object under {MIN_EXTENT_PX:g} px across is too small to "
+            "show its symmetry: use a larger view of it."
+        )
+    _, first, counts = np.unique(arr, axis=0, return_index=True, return_counts=True)
+    if np.any(counts > 1):
+        j = int(np.argmax(counts > 1))
+        p = arr[first[j]]
+        again = [int(rows[k]) for k in np.nonzero(np.all(arr == p, axis=1))[0]]
+        raise ValueError(
+            f"{name}: the point ({p[0]:.6g}, {p[1]:.6g}) occurs {int(counts[j])} times (rows "
+            f"{', '.join(map(str, again[:4]))}){' and ' + str(int((counts > 1).sum()) - 1) + ' other points repeat' if (counts > 1).sum() > 1 else ''}: "
+            "the curve touches itself or is traced more than once. An outline must visit each "
+            "point once, in order around the silhouette; for a mask with one-pixel-wide parts "
+            "smooth the mask first (or use a sub-pixel outline)."
         )
     seg = np.linalg.norm(np.diff(arr, axis=0), axis=1)
     gap = float(np.linalg.norm(arr[-1] - arr[0]))
@@ -188,14 +216,38 @@ def make_outline(points, n_points: int = DEFAULT_POINTS, *, name: str = "outline
     return Outline(jnp.asarray(resample_closed(arr, n_points)))
 
 
+def _looks_like_one_outline(outlines) -> bool:
+    if isinstance(outlines, Outline):
+        return True
+    if isinstance(outlines, np.ndarray):
+        return outlines.ndim == 2 or (outlines.ndim == 3 and outlines.shape[1] == 1)
+    if isinstance(outlines, (list, tuple)) and len(outlines) >= MIN_POINTS:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                arr = np.asarray(outlines)
+        except Exception:
+            return False
+        return arr.dtype != object and arr.ndim == 2 and arr.shape[1] == 2 and np.issubdtype(arr.dtype, np.number)
+    return False
+
+
 def as_outlines(outlines, n_points: int = DEFAULT_POINTS) -> list[Outline]:
     """Validate a sequence of outlines (arrays or :class:`Outline`)."""
-    if isinstance(outlines, Outline) or (
-        isinstance(outlines, np.ndarray) and outlines.ndim == 2
-    ):
+    if _looks_like_one_outline(outlines):
         raise ValueError(
             "expected a list of outlines (one per view), got a single outline. "
             "Wrap it in a list; note that calibration needs at least two views."
+        )
+    if outlines is None or isinstance(outlines, (str, bytes, dict)):
+        hint = {
+            str: " (a file name? load each outline first, e.g. np.loadtxt(path))",
+            bytes: "",
+            dict: " (pass list(d.values()))",
+        }.get(type(outlines), "")
+        raise ValueError(
+            f"expected a list of outlines (one (N, 2) array of pixel coordinates per view), got "
+            f"{type(outlines).__name__}{hint}."
         )
     try:
         seq = list(outlines)

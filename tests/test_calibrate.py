@@ -69,7 +69,7 @@ def test_result_code_when_not_positive_definite(spheres):
     "outlines, words",
     [
         ([np.random.default_rng(0).normal(size=(50, 2))], "a list of outlines"),
-        ("not outlines", "outline 0"),
+        ("not outlines", "got str"),
         ([], "at least two"),
     ],
 )
