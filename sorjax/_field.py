@@ -97,7 +97,9 @@ def _nearest_knot(field: DistanceField, x: Float[Array, "2"]) -> Float[Array, ""
         return jnp.argmin(jnp.sum((field.knots - x) ** 2, axis=-1))
     coarse = field.knots[::s]
     dc = jnp.sum((coarse - x) ** 2, axis=-1)
-    _, best = jax.lax.top_k(-dc, 2)
+    b1 = jnp.argmin(dc)  # two argmins: several times faster than lax.top_k on CPU
+    b2 = jnp.argmin(dc.at[b1].set(jnp.inf))
+    best = jnp.stack([b1, b2])
     idx = (best[:, None] * s + jnp.arange(-s, s + 1)[None, :]).reshape(-1) % m
     d2 = jnp.sum((field.knots[idx] - x) ** 2, axis=-1)
     return idx[jnp.argmin(d2)]
@@ -109,15 +111,12 @@ def closest_parameter(field: DistanceField, x: Float[Array, "2"]) -> Float[Array
     x = jax.lax.stop_gradient(x)
     t = _nearest_knot(field, x).astype(jnp.float64)
 
-    def newton(t, _):
+    for _ in range(NEWTON_STEPS):  # unrolled: cheaper than a scan for 4 steps
         c, dc, ddc = curve(field, t)
         r = x - c
         g = -r @ dc
-        h = dc @ dc - r @ ddc
-        h = jnp.maximum(h, 0.25 * (dc @ dc))
-        return t - jnp.clip(g / h, -1.0, 1.0), None
-
-    t, _ = jax.lax.scan(newton, t, None, length=NEWTON_STEPS)
+        h = jnp.maximum(dc @ dc - r @ ddc, 0.25 * (dc @ dc))
+        t = t - jnp.clip(g / h, -1.0, 1.0)
     return t
 
 

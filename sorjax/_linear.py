@@ -34,6 +34,9 @@ are left out; Method I needs two views with finite, distinct ``l_x``.
 
 from __future__ import annotations
 
+import functools
+
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -61,6 +64,7 @@ def pole_polar_rows(v: Float[Array, "V 3"], l: Float[Array, "V 3"]) -> Float[Arr
     return rows.reshape(-1, 5)
 
 
+@functools.partial(jax.jit, static_argnames=("unit_aspect",))
 def method_ii(v, l, *, unit_aspect: bool, weights=None):
     """Method IIa (``unit_aspect=False``) or IIb (``True``).
 
@@ -79,6 +83,7 @@ def method_ii(v, l, *, unit_aspect: bool, weights=None):
     return fu, fv, u0, v0, ok, w
 
 
+@jax.jit
 def method_i(v, l, *, finite_tol: float = 1e-9):
     """Method I (unit aspect ratio, zero skew).
 

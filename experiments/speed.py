@@ -1,0 +1,230 @@
+"""Speed of sorjax on the paper's Table 1, against a plain numpy/scipy baseline.
+
+Three measurements, printed as a table:
+
+1. The whole ``configs/table1.toml`` (or ``--trials`` per cell) through
+   ``sorjax.experiment.run_trials`` with every CPU core, wall time including JAX's
+   compilation (a fresh compilation cache is used unless ``--warm-cache``).
+2. One warm 3-view bundle calibration (two-sphere scene, f = 700 px, sigma = 1 px,
+   homologies given): median over repeated calls of ``calibrate(method="bundle")``.
+3. A baseline written the way a researcher would without sorjax: numpy +
+   ``scipy.optimize.least_squares`` on the same residuals (eq. 20: distance from the
+   transferred samples to the outline polyline, nearest vertex by a k-d tree then the
+   two adjacent segments), per-view fits from the same automatic starting candidates,
+   Method IIb by SVD, then the unit-aspect bundle seeded by it; a Python loop over
+   trials.  sorjax runs the same trials with the same methods (IIb, bundle-unit) in
+   the same process and the ratio of the two per-trial times is printed.
+
+    python experiments/speed.py                     # full Table 1 (1400 calibrations)
+    python experiments/speed.py --trials 10         # 10 trials per cell
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import tempfile
+import time
+
+import numpy as np
+
+
+def run_table1(trials: int | None, warm_cache: bool) -> tuple[float, int]:
+    if not warm_cache:
+        os.environ["SORJAX_CACHE"] = tempfile.mkdtemp(prefix="sorjax-xla-")
+    from sorjax.experiment import load_config, run_trials
+
+    cfg = load_config(os.path.join(os.path.dirname(__file__), "..", "configs", "table1.toml"))
+    if trials is not None:
+        cfg = cfg.replace(trials=trials)
+    t0 = time.perf_counter()
+    recs = run_trials(cfg, workers=0, progress=True)
+    return time.perf_counter() - t0, len(recs)
+
+
+def warm_bundle(repeats: int = 30) -> float:
+    import sorjax
+    from sorjax import scenes
+
+    sc = scenes.two_spheres(700.0)
+    outs = [scenes.paper_noise(o, 1.0, np.random.default_rng([0, i])) for i, o in enumerate(sc.outlines)]
+    hs = tuple(sorjax.fit_homology(o) for o in outs)
+    sorjax.calibrate(outs, homologies=hs)
+    ts = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        cal = sorjax.calibrate(outs, homologies=hs)
+        np.asarray(cal.K)
+        ts.append(time.perf_counter() - t0)
+    return statistics.median(ts)
+
+
+# ------------------------------------------------------------------- the baseline
+
+
+def _baseline_distance(tree, poly, y):
+    """Unsigned distance from points y to the closed polyline (nearest vertex, then
+    its two segments)."""
+    _, k = tree.query(y)
+    n = len(poly)
+    best = np.full(len(y), np.inf)
+    for a, b in ((k - 1) % n, k), (k, (k + 1) % n):
+        p, q = poly[a], poly[b]
+        d = q - p
+        t = np.clip(np.sum((y - p) * d, 1) / np.maximum(np.sum(d * d, 1), 1e-300), 0.0, 1.0)
+        best = np.minimum(best, np.linalg.norm(y - p - t[:, None] * d, axis=1))
+    return best
+
+
+def _W(v, l):
+    return np.eye(3) - 2.0 * np.outer(v, l) / (v @ l)
+
+
+def _transfer(W, x):
+    xh = np.c_[x, np.ones(len(x))] @ W.T
+    return xh[:, :2] / xh[:, 2:3]
+
+
+def _sph(a, b):
+    return np.array([np.cos(a) * np.cos(b), np.sin(a) * np.cos(b), np.sin(b)])
+
+
+def baseline_trial(outs, starts, n_samples=100):
+    """Per-view fits, IIb and the unit-aspect bundle with scipy; returns (fu, fv, u0, v0)."""
+    from scipy.optimize import least_squares
+    from scipy.spatial import cKDTree
+
+    allp = np.concatenate(outs)
+    c, s = allp.mean(0), np.sqrt(np.mean(np.sum((allp - allp.mean(0)) ** 2, 1)) / 2)
+    polys = [(o - c) / s for o in outs]
+    trees = [cKDTree(p) for p in polys]
+    samples = []
+    for p in polys:
+        seg = np.linalg.norm(np.roll(p, -1, 0) - p, axis=1)
+        arc = np.r_[0, np.cumsum(seg)]
+        t = np.linspace(0, arc[-1], n_samples, endpoint=False)
+        pc = np.vstack([p, p[:1]])
+        samples.append(np.c_[np.interp(t, arc, pc[:, 0]), np.interp(t, arc, pc[:, 1])])
+    T = np.array([[1 / s, 0, -c[0] / s], [0, 1 / s, -c[1] / s], [0, 0, 1.0]])
+
+    vs, ls = [], []
+    for j in range(len(polys)):
+        best = None
+        for v0, l0 in starts[j]:
+            v0 = T @ v0
+            l0 = np.linalg.solve(T.T, l0)
+            v0 = v0 / np.linalg.norm(v0)
+            l0 = l0 / np.linalg.norm(l0[:2])
+            x0 = np.array([np.arctan2(v0[1], v0[0]), np.arcsin(np.clip(v0[2], -1, 1)),
+                           np.arctan2(l0[1], l0[0]), -l0[2]])
+
+            def res(x, j=j):
+                v = _sph(x[0], x[1])
+                l = np.array([np.cos(x[2]), np.sin(x[2]), -x[3]])
+                return _baseline_distance(trees[j], polys[j], _transfer(_W(v, l), samples[j]))
+
+            sol = least_squares(res, x0, method="lm", xtol=1e-10, ftol=1e-10, max_nfev=400)
+            if best is None or sol.cost < best.cost:
+                best = sol
+        x = best.x
+        vs.append(_sph(x[0], x[1]))
+        ls.append(np.array([np.cos(x[2]), np.sin(x[2]), -x[3]]))
+
+    # Method IIb (unit aspect, zero skew): omega = [[w1, 0, w2], [0, w1, w3], [w2, w3, w4]]
+    rows = []
+    for v, l in zip(vs, ls):
+        Bv = np.array([[v[0], v[2], 0, 0], [v[1], 0, v[2], 0], [0, v[0], v[1], v[2]]])
+        P = np.cross(l, np.eye(3))  # l x (omega v) = 0: two independent rows
+        rows.extend(P[:2] @ Bv)
+    w = np.linalg.svd(np.array(rows))[2][-1]
+    w = w / w[0]
+    u0, v0 = -w[1], -w[2]
+    f2 = w[3] - u0**2 - v0**2
+    if not f2 > 0:
+        return None
+    f = np.sqrt(f2)
+
+    def bres(y):
+        f, u0, v0 = np.exp(y[0]), y[1], y[2]
+        Ki = np.linalg.inv(np.array([[f, 0, u0], [0, f, v0], [0, 0, 1.0]]))
+        om = Ki.T @ Ki
+        out = []
+        for j in range(len(polys)):
+            v = _sph(y[3 + 2 * j], y[4 + 2 * j])
+            out.append(_baseline_distance(trees[j], polys[j], _transfer(_W(v, om @ v), samples[j])))
+        return np.concatenate(out)
+
+    y0 = [np.log(f), u0, v0]
+    for v in vs:
+        y0 += [np.arctan2(v[1], v[0]), np.arcsin(np.clip(v[2], -1, 1))]
+    sol = least_squares(bres, np.array(y0), method="lm", xtol=1e-10, ftol=1e-10, max_nfev=2000)
+    f, u0, v0 = np.exp(sol.x[0]), sol.x[1], sol.x[2]
+    K = np.linalg.inv(T) @ np.array([[f, 0, u0], [0, f, v0], [0, 0, 1.0]])
+    return K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+
+
+def compare_baseline(n: int):
+    import sorjax
+    from sorjax import scenes
+    from sorjax._camera import normalising_transform, transform_points
+    from sorjax._homology import bitangent_candidates, conic_candidates, mirror_candidates, _view_setup
+    from sorjax._outline import make_outline
+    import jax.numpy as jnp
+
+    sc = scenes.two_spheres(700.0)
+    trials = [[scenes.paper_noise(o, 1.0, np.random.default_rng([1, t, i])) for i, o in enumerate(sc.outlines)]
+              for t in range(n)]
+
+    def starts_of(o):  # the same automatic candidates as sorjax's, in pixels (not timed)
+        pts = np.asarray(make_outline(o).points)
+        T = normalising_transform(pts)
+        pn = np.asarray(transform_points(T, pts))
+        _, samples, _ = _view_setup(jnp.asarray(pn), 100)
+        cands = bitangent_candidates(pn) + mirror_candidates(pn, samples) + conic_candidates(pn)
+        return [(np.linalg.solve(T, v), T.T @ l) for v, l in cands]
+
+    starts = [[starts_of(o) for o in outs] for outs in trials]
+    # sorjax: fits + IIb + unit-aspect bundle, warm
+    hs = tuple(sorjax.fit_homology(o) for o in trials[0])
+    sorjax.calibrate(trials[0], "IIb", homologies=hs)
+    sorjax.calibrate(trials[0], aspect_ratio=1.0, homologies=hs)
+    t0 = time.perf_counter()
+    sj = []
+    for outs in trials:
+        hs = tuple(sorjax.fit_homology(o) for o in outs)
+        sorjax.calibrate(outs, "IIb", homologies=hs)
+        sj.append(sorjax.calibrate(outs, aspect_ratio=1.0, homologies=hs).fu)
+    t_sorjax = (time.perf_counter() - t0) / n
+    t0 = time.perf_counter()
+    bl = [baseline_trial(outs, st) for outs, st in zip(trials, starts)]
+    t_base = (time.perf_counter() - t0) / n
+    e_s = np.array(sj) / 700 * 100 - 100
+    e_b = np.array([np.nan if b is None else b[0] for b in bl]) / 700 * 100 - 100
+    return t_sorjax, t_base, e_s, e_b
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--trials", type=int, default=None, help="trials per Table 1 cell (default: the config's 100)")
+    p.add_argument("--baseline-trials", type=int, default=10)
+    p.add_argument("--warm-cache", action="store_true", help="reuse the on-disk compilation cache")
+    p.add_argument("--skip-table", action="store_true")
+    a = p.parse_args(argv)
+    lines = []
+    if not a.skip_table:
+        wall, n = run_table1(a.trials, a.warm_cache)
+        lines.append(f"Table 1, {n} calibrations (I, IIa, IIb, bundle, bundle-unit), {os.cpu_count()} cores: "
+                     f"{wall:.1f} s wall incl. compilation ({1000 * wall / n:.0f} ms per calibration); target 30 s")
+    t = warm_bundle()
+    lines.append(f"one warm 3-view bundle calibration (homologies given): {1000 * t:.1f} ms; target 10 ms")
+    ts, tb, es, eb = compare_baseline(a.baseline_trials)
+    lines.append(f"{a.baseline_trials} trials, fits + IIb + unit-aspect bundle: sorjax {1000 * ts:.0f} ms/trial, "
+                 f"numpy/scipy baseline {1000 * tb:.0f} ms/trial: sorjax {tb / ts:.2f}x faster")
+    lines.append(f"  focal error RMS (%): sorjax {np.sqrt(np.nanmean(es**2)):.2f}, baseline {np.sqrt(np.nanmean(eb**2)):.2f}"
+                 f" ({int(np.isnan(eb).sum())} baseline failures)")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
