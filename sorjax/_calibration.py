@@ -337,11 +337,22 @@ def _view_angles_deg(K: np.ndarray, vx: np.ndarray) -> np.ndarray:
     return np.degrees(np.arcsin(np.clip(np.abs(n[:, 2]) / np.linalg.norm(n, axis=1), 0.0, 1.0)))
 
 
-def _advice(K, vx, ls, outs, free_aspect: bool, aspect_weak: bool) -> list[str]:
+def _advice(K, vx, ls, outs, free_aspect: bool, aspect_weak: bool, used=None) -> list[str]:
     """What kind of extra view would help, from the geometry of the views (``K`` the
     raw estimate, used only for the angles; it may be poor when it is not determined)."""
     tips = []
-    spread = _axis_spread_deg(np.asarray(ls))
+    vx, ls = np.asarray(vx), np.asarray(ls)
+    for i in range(len(vx)):
+        for j in range(i + 1, len(vx)):
+            if min(np.linalg.norm(vx[i] - vx[j]), np.linalg.norm(vx[i] + vx[j])) < 1e-6 and min(
+                np.linalg.norm(ls[i] - ls[j]), np.linalg.norm(ls[i] + ls[j])
+            ) < 1e-6 * (1 + abs(ls[i, 2])):
+                vi, vj = (i, j) if used is None else (used[i], used[j])
+                tips.append(
+                    f"views {vi} and {vj} have the same axis and vertex, so they give the same "
+                    "constraints (the same view twice?): move or tilt the object between views"
+                )
+    spread = _axis_spread_deg(ls)
     if np.all(np.isfinite(K)) and K[0, 0] > 0 and K[1, 1] > 0:
         theta = _view_angles_deg(np.asarray(K), np.asarray(vx))
         if np.max(theta) < NEAR_AXIS_DEG:
@@ -395,7 +406,7 @@ def _fmt_std(x, sd):
     return f"{x:.1f} +- {sd:.2g}" if np.isfinite(sd) else f"{x:.1f} +- inf"
 
 
-def _assess(K, cov_unit, s_px, outs, vx, ls, free_aspect: bool):
+def _assess(K, cov_unit, s_px, outs, vx, ls, free_aspect: bool, used=None):
     """Which intrinsics the views determine.  Returns ``(determined (4,) bool, std (4,),
     weak_note or None, advice)`` for the raw estimate ``K`` (pixels), the covariance
     per px^2 of residual ``cov_unit`` and the residual standard error ``s_px``."""
@@ -418,7 +429,7 @@ def _assess(K, cov_unit, s_px, outs, vx, ls, free_aspect: bool):
             c = np.asarray(cov_unit)
             q = c[0, 0] / est[0] ** 2 + c[1, 1] / est[1] ** 2 - 2 * c[0, 1] / (est[0] * est[1])
             aspect_weak = bool(np.sqrt(max(q, 0.0)) * s_floor > WEAK_REL_STD)
-    advice = _advice(K, vx, ls, outs, free_aspect, aspect_weak)
+    advice = _advice(K, vx, ls, outs, free_aspect, aspect_weak, used)
     return determined, std, weak, advice
 
 
@@ -433,12 +444,15 @@ def _nan_calibration(homologies, result, method, a, used, details, dropped, note
     )
 
 
-def _check_options(n_samples, n_points, homologies, n_views):
+def _check_sizes(n_samples, n_points):
     for name, val, lo in (("n_samples", n_samples, 10), ("n_points", n_points, 64)):
         if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < lo:
             raise ValueError(f"{name} must be an integer >= {lo}; got {val!r}.")
     if n_samples > n_points:
         raise ValueError(f"n_samples ({n_samples}) must not exceed n_points ({n_points}).")
+
+
+def _check_homologies(homologies, n_views):
     if homologies is not None:
         try:
             homologies = tuple(homologies)
@@ -511,6 +525,7 @@ def calibrate(
       saying what kind of extra view would help.
     """
     _check_method(method, aspect_ratio)
+    _check_sizes(n_samples, n_points)
     outs = as_outlines(outlines, n_points)
     if len(outs) < 2:
         raise ValueError(
@@ -520,7 +535,7 @@ def calibrate(
             "which leaves the camera undetermined. Add an outline from another view (the object "
             "moved or tilted, or another object)."
         )
-    homologies = _check_options(n_samples, n_points, homologies, len(outs))
+    homologies = _check_homologies(homologies, len(outs))
     notes: list[str] = []
 
     def note(msg):
@@ -626,7 +641,9 @@ def calibrate(
     details = ""
     K_np = np.asarray(K)
     if cov_unit is not None and np.all(np.isfinite(K_np)) and K_np[0, 0] > 0 and K_np[1, 1] > 0:
-        determined, std, weak, advice = _assess(K_np, cov_unit, s_px, outs_u, np.asarray(vx), np.asarray(ls), free_aspect)
+        determined, std, weak, advice = _assess(
+            K_np, cov_unit, s_px, outs_u, np.asarray(vx), np.asarray(ls), free_aspect, used
+        )
         est = [K_np[0, 0], K_np[1, 1], K_np[0, 2], K_np[1, 2]]
         if not determined.all():
             code = RESULTS.only_principal_point if (not determined[:2].any() and determined[2:].all()) else RESULTS.degenerate

@@ -1,0 +1,300 @@
+"""Degenerate geometry and bad input (paper, Section 6): detected, reported, never a
+silent wrong K.  Scenes are exact (sorjax.scenes) so every claim is checked against
+the ground truth."""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+import sorjax
+from sorjax import scenes
+
+K_TRUE = scenes.intrinsics(800.0, principal_point=(330.0, 250.0))
+HEIGHT = 480
+
+# (elevation deg, azimuth deg, roll rad[, pixel where the object's centre lands])
+AT_INFINITY = [(30, 0, 0.3), (-10, 70, -0.5), (50, 200, 1.0)]  # object centre at the principal point
+FINITE = (50, 200, 1.0, (150, 120))
+MIRROR = [(0, 0, 0), (20, 90, 0)]  # upright, roll 0, centred: mirror-symmetric outlines
+LEVEL_UPRIGHT = [(0, 0, 0, (200, 250)), (0, 70, 0, (450, 200)), (0, 200, 0, (330, 300))]
+NEAR_AXIS = [(30, 0, 0.3, (340, 260)), (-10, 70, -0.5, (320, 245)), (50, 200, 1.0, (335, 240))]
+GOOD = [(30, 0, 0.3, (150, 150)), (-10, 70, -0.5, (480, 350)), (50, 200, 1.0, (200, 380))]
+
+
+def pose_at(profile, K, el_deg, az_deg, roll=0.0, pix=None):
+    """Look at the object's centre O (on its axis), then move the camera parallel to the
+    image plane so that O lands at ``pix`` (None: at the principal point, where the
+    optical axis meets the revolution axis and v_x is at infinity)."""
+    O = np.array([0.0, 0.5 * (profile.y0 + profile.y1), 0.0])
+    Rb = math.hypot(0.5 * (profile.y1 - profile.y0), profile.r_max)
+    D = 2.0 * math.sqrt(K[0, 0] * K[1, 1]) * Rb / (0.5 * HEIGHT)
+    el, az = math.radians(el_deg), math.radians(az_deg)
+    u = np.array([math.cos(el) * math.sin(az), math.sin(el), math.cos(el) * math.cos(az)])
+    R, _ = scenes.look_at(O + D * u, O, (0.0, 1.0, 0.0), roll)
+    pix = (K[0, 2], K[1, 2]) if pix is None else pix
+    c_cam = np.array([(pix[0] - K[0, 2]) * D / K[0, 0], (pix[1] - K[1, 2]) * D / K[1, 1], D])
+    return R, c_cam - R @ O
+
+
+def posed(specs):
+    prof = scenes.vase()
+    return scenes.sor_scene(prof, K_TRUE, [pose_at(prof, K_TRUE, *s) for s in specs])
+
+
+def fits(outlines):
+    return tuple(sorjax.fit_homology(o) for o in outlines)
+
+
+def k_error(cal, K=K_TRUE) -> float:
+    est = np.array([cal.fu, cal.fv, cal.u0, cal.v0])
+    return float(np.max(np.abs(est - np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]]))) / K[1, 1])
+
+
+def blob(seed, R=120.0, amp=0.35, n=1500):
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    r = np.ones_like(t)
+    for k in range(2, 7):
+        r += rng.uniform(0.5, 1.0) * amp / (k - 1) * np.cos(k * t + rng.uniform(0, 2 * np.pi))
+    return np.stack([320 + R * r * np.cos(t), 240 + R * r * np.sin(t)], 1)
+
+
+def sphere_outline(K, pose, centre, radius, n=800):
+    """Exact image of a sphere: points of its image conic on rays from the centre's image."""
+    P = scenes.camera_matrix(K, *pose)
+    C = scenes.sphere_image_conic(P, centre, radius)
+    x0 = P @ np.append(centre, 1.0)
+    c = np.array([x0[0] / x0[2], x0[1] / x0[2], 1.0])
+    pts = []
+    for th in np.linspace(0, 2 * np.pi, n, endpoint=False):
+        d = np.array([math.cos(th), math.sin(th), 0.0])
+        a, b, cc = d @ C @ d, 2 * c @ C @ d, c @ C @ c
+        s = max((-b + math.sqrt(b * b - 4 * a * cc)) / (2 * a), (-b - math.sqrt(b * b - 4 * a * cc)) / (2 * a))
+        pts.append(c[:2] + s * d[:2])
+    return np.array(pts)
+
+
+@pytest.fixture(scope="module")
+def good():
+    sc = posed(GOOD)
+    return sc, fits(sc.outlines)
+
+
+@pytest.fixture(scope="module")
+def at_infinity():
+    sc = posed(AT_INFINITY)
+    return sc, fits(sc.outlines)
+
+
+# ------------------------------------------------------------------ conic outlines
+
+
+def test_sphere_and_ellipse_outlines_are_dropped_with_the_reason(good):
+    sc, homs = good
+    prof = scenes.vase()
+    sphere = sphere_outline(K_TRUE, pose_at(prof, K_TRUE, 20, 40, 0.2, (200, 180)), np.array([0.0, 0.15, 0.0]), 0.08)
+    h = sorjax.fit_homology(sphere)
+    assert h.is_conic and not any(g.is_conic for g in homs)
+    with pytest.warns(UserWarning, match=r"view 1: the outline is a conic.*Dropped"):
+        cal = sorjax.calibrate(
+            [sc.outlines[0], sphere, sc.outlines[1], sc.outlines[2]], method="IIb", homologies=(homs[0], h) + homs[1:]
+        )
+    assert cal.success and cal.used == (0, 2, 3) and cal.dropped == ((1, "conic outline"),)
+    assert k_error(cal) < 1e-4
+    t = np.linspace(0, 2 * np.pi, 800, endpoint=False)
+    ellipse = np.stack([300 + 90 * np.cos(t + 0.3), 200 + 60 * np.sin(t)], 1)
+    with pytest.warns(UserWarning, match="conic"):
+        few = sorjax.calibrate([sphere, sc.outlines[0], ellipse], method="IIb")
+    assert few.result == sorjax.RESULTS.too_few_views and not few.success and np.isnan(np.asarray(few.K)).all()
+    assert "view 0: conic outline" in few.message and "view 2: conic outline" in few.message
+    assert "A single view gives only two constraints" in few.message
+    with pytest.raises(sorjax.CalibrationError, match="Fewer than two views"), pytest.warns(UserWarning):
+        sorjax.calibrate([sphere, sc.outlines[0]], throw=True)
+
+
+# ----------------------------------------------------------------- v_x at infinity
+
+
+@pytest.mark.parametrize("method", ["bundle", "I", "IIa", "IIb"])
+def test_every_vx_at_infinity_gives_only_the_principal_point(at_infinity, good, method):
+    sc, homs = at_infinity
+    for view, h in zip(sc.views, homs):
+        assert abs(view.v_x[2]) < 1e-12  # the scene really has v_x at infinity
+        assert h.v_x_at_infinity
+        assert abs(view.l_s @ np.array([K_TRUE[0, 2], K_TRUE[1, 2], 1.0])) < 1e-9  # l_s through the pp
+    assert not any(h.v_x_at_infinity for h in good[1])
+    cal = sorjax.calibrate(sc.outlines, method=method, homologies=homs)
+    assert cal.result == sorjax.RESULTS.only_principal_point and not cal.success
+    assert np.isnan(cal.fu) and np.isnan(cal.fv)  # no invented focal length
+    np.testing.assert_allclose(cal.principal_point, K_TRUE[:2, 2], atol=1e-4)
+    assert np.isinf(cal.std[:2]).all() and np.all(cal.std[2:] < 1e-3)
+    assert "principal point" in cal.message and "views 0, 1, 2" in cal.message
+    with pytest.raises(sorjax.CalibrationError, match="not the focal length"):
+        sorjax.calibrate(sc.outlines, method=method, homologies=homs, throw=True)
+
+
+def test_every_vx_at_infinity_with_noise(at_infinity):
+    sc, _ = at_infinity
+    outs = [scenes.paper_noise(o, 1.0, 10 + i) for i, o in enumerate(sc.outlines)]
+    cal = sorjax.calibrate(outs)
+    assert cal.result == sorjax.RESULTS.only_principal_point
+    assert np.isnan(cal.fv)
+    assert np.max(np.abs(cal.principal_point - K_TRUE[:2, 2])) < 2.0
+
+
+def test_one_finite_vx_is_enough(at_infinity):
+    sc = posed(AT_INFINITY[:2] + [FINITE])
+    cal = sorjax.calibrate(sc.outlines)
+    assert cal.success, cal.message
+    assert k_error(cal) < 1e-4
+
+
+def test_mirror_views_free_aspect_is_reported_not_invented():
+    """Two mirror-symmetric views (v_x at infinity, imaged axis vertical through the
+    principal point) and one general view: with a free aspect ratio fu, fv and v0 are
+    not determined (exact null directions: infinite std); with unit aspect they are."""
+    sc = posed(MIRROR + [FINITE])
+    homs = fits(sc.outlines)
+    assert [h.v_x_at_infinity for h in homs] == [True, True, False]
+    cal = sorjax.calibrate(sc.outlines, homologies=homs)
+    assert cal.result == sorjax.RESULTS.degenerate and not cal.success
+    assert np.isnan([cal.fu, cal.fv, cal.v0]).all()
+    assert abs(cal.u0 - K_TRUE[0, 2]) < 1e-3  # the one intrinsic these views do fix
+    assert np.isinf(cal.std[[0, 1, 3]]).all() and cal.std[2] < 1e-2
+    assert "Not determined by these views: fu" in cal.message and "aspect_ratio=1.0" in cal.message
+    unit = sorjax.calibrate(sc.outlines, aspect_ratio=1.0, homologies=homs)
+    assert unit.success and k_error(unit) < 1e-4
+
+
+def test_parallel_imaged_axes_leave_fv_free():
+    """Upright objects seen by a level camera: every l_s is vertical and every v_x lies on
+    the horizon, so fv never enters the constraints (free aspect)."""
+    sc = posed(LEVEL_UPRIGHT)
+    homs = fits(sc.outlines)
+    cal = sorjax.calibrate(sc.outlines, homologies=homs)
+    assert cal.result == sorjax.RESULTS.degenerate
+    assert np.isnan(cal.fv) and abs(cal.fu - K_TRUE[0, 0]) < 1e-2
+    assert "Not determined by these views: fv" in cal.message
+    assert "all imaged axes are within" in cal.message and "aspect_ratio=1.0" in cal.message
+    unit = sorjax.calibrate(sc.outlines, aspect_ratio=1.0, homologies=homs)
+    assert unit.success and k_error(unit) < 1e-4
+
+
+def test_near_degenerate_views_warn_with_advice():
+    """The object within 10 px of the principal point in every view: v_x far away
+    (about 1 deg from the optical axis).  Exact outlines still give K, with a warning
+    that the geometry is weak and what to add.  With 1 px of noise the views cannot
+    tell v_x from infinity: either only the principal point is reported, or (when one
+    v_x stands out from the noise) K with a large std and the warning -- never a
+    confident K."""
+    sc = posed(NEAR_AXIS)
+    with pytest.warns(UserWarning, match=r"weak geometry.*straight at the object's axis.*edge or corner"):
+        cal = sorjax.calibrate(sc.outlines)
+    assert cal.success and k_error(cal) < 1e-4
+    assert any("weak geometry" in n for n in cal.notes)
+    noisy = lambda seed: [scenes.paper_noise(o, 1.0, seed + i) for i, o in enumerate(sc.outlines)]  # noqa: E731
+    with pytest.warns(UserWarning, match="weak geometry"):
+        warned = sorjax.calibrate(noisy(10))
+    assert warned.success and warned.std[1] / K_TRUE[1, 1] > 0.05
+    pp_only = sorjax.calibrate(noisy(20))
+    assert pp_only.result == sorjax.RESULTS.only_principal_point and np.isnan(pp_only.fv)
+    err = np.abs(pp_only.principal_point - K_TRUE[:2, 2])
+    assert np.all(err < 3 * pp_only.std[2:] + 1.0)  # honest about the principal point too
+
+
+def test_no_warning_for_a_good_configuration(good):
+    sc, homs = good
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        cal = sorjax.calibrate(sc.outlines, homologies=homs)
+    assert cal.success and k_error(cal) < 1e-4 and cal.notes == () and cal.details == ""
+
+
+def test_same_view_three_times_is_degenerate(good):
+    sc, homs = good
+    cal = sorjax.calibrate([sc.outlines[0]] * 3, method="IIb", homologies=(homs[0],) * 3)
+    assert not cal.success
+    assert np.isnan(np.asarray(cal.K)[[0, 1], [0, 1]]).all()
+    assert "same view twice" in cal.message or "positive definite" in cal.message
+
+
+# ------------------------------------------------------------- not symmetric at all
+
+
+def test_asymmetric_blob_is_dropped(good):
+    sc, homs = good
+    b = blob(1)
+    hb = sorjax.fit_homology(b)
+    assert float(hb.rms) > 3.0  # vs < 1e-4 px for the true views
+    assert all(float(h.rms) < 1e-4 for h in homs)
+    with pytest.warns(UserWarning, match=r"view 1: the outline is not symmetric.*Dropped"):
+        cal = sorjax.calibrate([sc.outlines[0], b] + sc.outlines[1:], homologies=(homs[0], hb) + homs[1:])
+    assert cal.success and cal.used == (0, 2, 3) and cal.dropped[0][0] == 1
+    assert k_error(cal) < 1e-4
+    with pytest.warns(UserWarning, match="not symmetric"):
+        few = sorjax.calibrate([b, blob(2), sc.outlines[0]])
+    assert few.result == sorjax.RESULTS.too_few_views and "not symmetric" in few.message
+
+
+# ------------------------------------------------------------------------ bad input
+
+
+def _ellipse(n=600):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.stack([320 + 120 * np.cos(t), 240 + 70 * np.sin(t)], 1)
+
+
+E = _ellipse()
+_NAN = E.copy()
+_NAN[4] = np.nan
+_INF = E.copy()
+_INF[9, 1] = -np.inf
+_T = np.linspace(0, 2 * np.pi, 200, endpoint=False)
+_EIGHT = np.stack([100 * np.sin(_T), 60 * np.sin(2 * _T)], 1) + 300
+
+
+@pytest.mark.parametrize(
+    "outlines, kwargs, words",
+    [
+        ([], {}, "at least two outlines.*got 0"),
+        ([E], {}, "at least two outlines.*got 1.*two constraints on the four intrinsics"),
+        (E, {}, "got a single outline. Wrap it in a list"),
+        (E[:, None, :], {}, "got a single outline"),
+        (E.tolist(), {}, "got a single outline"),
+        ("view.txt", {}, "got str.*np.loadtxt"),
+        (None, {}, "got NoneType"),
+        ({"a": E, "b": E}, {}, "got dict"),
+        (3, {}, "got int"),
+        ([E, _NAN], {}, "outline 1: 1 of 600 points are NaN or infinite .first at row 4"),
+        ([E, _INF], {}, "outline 1: 1 of 600 points are NaN or infinite .first at row 9"),
+        ([E, np.zeros((0, 2))], {}, "outline 1: is empty"),
+        ([E, E[:5]], {}, "outline 1: has 5 distinct points; at least 10"),
+        ([E, np.ones((40, 2))], {}, "outline 1: has 1 distinct points"),
+        ([E, E[:300]], {}, "outline 1: looks like an open curve"),
+        ([E, _EIGHT], {}, "outline 1: crosses itself"),
+        ([E, np.vstack([E, E])], {}, "outline 1: the point .* occurs 2 times.*traced more than once"),
+        ([E, np.vstack([E[:100], E[40:41], E[100:]])], {}, r"outline 1: .*occurs 2 times \(rows 40, 100\)"),
+        ([E / 1000, E], {}, "outline 0: spans only .* px. Outlines must be in pixel coordinates"),
+        ([E, np.hstack([E, E[:, :1]])], {}, r"outline 1: expected shape \(N, 2\), got \(600, 3\)"),
+        ([E, E.T], {}, "transposed"),
+        ([E, E[:, 0]], {}, r"expected shape \(N, 2\)"),
+        ([E, E.astype(str)], {}, "expected real numbers, got dtype <U"),
+        ([E, E.astype(complex)], {}, "got dtype complex128"),
+        ([E, [[1, 2], [3]]], {}, "could not be read"),
+        ([E, None], {}, "outline 1: expected an .N, 2. array.*got NoneType"),
+        ([E, "abc"], {}, "outline 1: .*got str 'abc'"),
+        ([E, E], {"method": "III"}, "method must be one of"),
+        ([E, E], {"aspect_ratio": 0.0}, "aspect_ratio must be a positive"),
+        ([E, E], {"n_samples": 0}, "n_samples must be an integer >= 10"),
+        ([E, E], {"n_points": 16}, "n_points must be an integer >= 64"),
+        ([E, E], {"homologies": [None]}, "got 1 homologies for 2 outlines"),
+        ([E, E], {"homologies": [None, None]}, r"homologies\[0\] is a NoneType, not a sorjax.Homology"),
+    ],
+)
+def test_bad_input_says_what_is_wrong_before_any_tracing(outlines, kwargs, words):
+    with pytest.raises(ValueError, match=words) as info:
+        sorjax.calibrate(outlines, **kwargs)
+    frames = [str(e.path) for e in info.traceback]
+    assert not any(("jax" in p and "sorjax" not in p) or "optimistix" in p for p in frames), frames
