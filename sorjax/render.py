@@ -190,7 +190,8 @@ def polygon_coverage(polygon, shape: tuple[int, int], supersample: int = 32):
     ----------
     polygon : (M, 2) array
         Closed simple polygon in pixels (OpenCV convention; no repeated end point; any
-        orientation).
+        orientation).  For a self-intersecting polygon the result is the clipped
+        winding number, not the even-odd area.
     shape : (H, W)
         Image size in pixels (rows, columns).
     supersample : int
