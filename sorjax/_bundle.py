@@ -38,8 +38,8 @@ from jaxtyping import Array, Float
 
 from ._camera import omega_matrix, omega_vector_from_intrinsics
 from ._camera import pixel_intrinsics as _pixel_intrinsics
-from ._field import DistanceField, curve_points, make_field, sample_weights
-from ._homology import _tangent_basis, symmetry_residuals
+from ._field import DistanceField, closest_parameter, curve_points, make_field, sample_weights
+from ._homology import _tangent_basis, homology_matrix, symmetry_residuals, transfer
 
 
 class BundleProblem(eqx.Module):
@@ -121,12 +121,15 @@ def covariance(y, problem: BundleProblem, T):
     nk = y[0].shape[0]
     dof = jnp.maximum(jnp.sum(problem.weights) - flat.shape[0], 1)
     s2 = jnp.sum(r**2) / dof
-    H = J.T @ J
-    Hkk, Hkd, Hdd = H[:nk, :nk], H[:nk, nk:], H[nk:, nk:]
-    F = Hkk - Hkd @ jnp.linalg.pinv(Hdd, hermitian=True) @ Hkd.T
+    Jk, Jd = J[:, :nk], J[:, nk:]
+    # the intrinsics' columns with the vertices' directions projected out
+    G = Jk - Jd @ (jnp.linalg.pinv(Jd.T @ Jd, hermitian=True) @ (Jd.T @ Jk))
+    F = G.T @ G  # = the Schur complement J_k^T J_k - J_k^T J_d (J_d^T J_d)^-1 J_d^T J_k
     lam, U = jnp.linalg.eigh(0.5 * (F + F.T))
     null = lam <= NULL_EIGENVALUE * jnp.max(jnp.abs(lam))
-    cov_k = s2 * (U * jnp.where(null, 0.0, 1.0 / jnp.where(null, 1.0, lam))) @ U.T
+    F_inv = (U * jnp.where(null, 0.0, 1.0 / jnp.where(null, 1.0, lam))) @ U.T
+    meat = _correlated_meat(G, r, y, problem, s2)
+    cov_k = F_inv @ meat @ F_inv
 
     Gk = jax.jacfwd(lambda k: _pixel_intrinsics(T, *unpack_intrinsics(k, problem.aspect)))(y[0])
     cov = Gk @ cov_k @ Gk.T
@@ -137,6 +140,44 @@ def covariance(y, problem: BundleProblem, T):
     cov = jnp.where(bad, jnp.nan, cov)
     cov = jnp.where(jnp.eye(4, dtype=bool) & bad, jnp.inf, cov)
     return cov, s2
+
+
+def _correlated_meat(G, r, y, problem: BundleProblem, s2):
+    """``G^T Sigma_r G`` for residuals that are correlated, as eq. 20's are.
+
+    Residual ``i`` of a view reads the outline's noise at its sample ``x_i`` *and* at
+    the target point near ``W x_i``, which is (close to) the sample ``x_j(i)``
+    whose own residual reads the same two places: mirror pairs share their noise.
+    Neighbouring samples also share it when the noise is smooth along the curve.
+    So ``Sigma_r = s^2 (I + rho_1 A_1 + rho_m A_m)`` with ``A_1`` joining
+    neighbouring samples and ``A_m`` mirror pairs, and the correlations estimated
+    from the residuals themselves, ``rho = sum_i r_i r_pair(i) / sum_i r_i^2``
+    (clipped to [-1, 1]).  Without these terms (``s^2 (J^T J)^-1``) the standard
+    deviations came out about 35 % too small on the two-sphere scene with the
+    paper's noise."""
+    V, N = problem.samples.shape[:2]
+    fu, fv, u0, v0 = unpack_intrinsics(y[0], problem.aspect)
+    omega = omega_matrix(omega_vector_from_intrinsics(fu, fv, u0, v0))
+    v = vertices(y[1], problem.v0, problem.E)
+    l = v @ omega
+
+    def mirror(field, samples, v, l):
+        t = jax.vmap(closest_parameter, in_axes=(None, 0))(field, transfer(homology_matrix(v, l), samples))
+        return jnp.round(t * N / field.n_knots).astype(jnp.int32) % N
+
+    idx = jnp.arange(N)
+    j = jax.vmap(mirror)(problem.fields, problem.samples, v, l)  # (V, N)
+    gap = jnp.minimum((j - idx) % N, (idx - j) % N)
+    offs = (jnp.arange(V) * N)[:, None]
+    jm = (j + offs).reshape(-1)
+    use_m = (gap > 1).reshape(-1).astype(r.dtype)  # pairs that are not neighbours or self
+    j1 = ((idx + 1) % N + offs).reshape(-1)
+    rr = jnp.maximum(jnp.sum(r**2), 1e-300)
+    rho_1 = jnp.clip(jnp.sum(r * r[j1]) / rr, -1.0, 1.0)
+    rho_m = jnp.clip(jnp.sum(use_m * r * r[jm]) / jnp.maximum(jnp.sum(use_m * r**2), 1e-300), -1.0, 1.0)
+    C1 = G.T @ G[j1]
+    Cm = G.T @ (use_m[:, None] * G[jm])
+    return s2 * (G.T @ G + rho_1 * (C1 + C1.T) + 0.5 * rho_m * (Cm + Cm.T))
 
 
 def chart(v_seed: np.ndarray):
