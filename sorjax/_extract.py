@@ -487,8 +487,9 @@ def outlines_from_mask(
 # ----------------------------------------------------------------------------------
 
 
-def _as_bgr8(image) -> np.ndarray:
-    """(H, W, 3) uint8 BGR from uint8/uint16/float colour or grey images."""
+def _as_bgr(image) -> tuple[np.ndarray, np.ndarray]:
+    """``(uint8 BGR for GrabCut, float64 BGR in 8-bit units)`` (both (H, W, 3)) from
+    uint8, uint16 or float (in [0, 1]) colour or grey images."""
     if isinstance(image, (str, bytes)) or image is None:
         raise ValueError(
             f"image must be an array (H, W, 3), got {type(image).__name__}; read the file "
@@ -505,9 +506,9 @@ def _as_bgr8(image) -> np.ndarray:
     if im.shape[0] < 16 or im.shape[1] < 16:
         raise ValueError(f"image is too small ({im.shape[1]}x{im.shape[0]} px): need at least 16x16")
     if im.dtype == np.uint8:
-        out = im
+        f = im.astype(np.float64)
     elif im.dtype == np.uint16:
-        out = (im.astype(np.float64) / 257.0 + 0.5).astype(np.uint8)
+        f = im.astype(np.float64) / 257.0
     elif np.issubdtype(im.dtype, np.floating):
         if not np.all(np.isfinite(im)):
             raise ValueError("image contains NaN or infinite values")
@@ -517,14 +518,16 @@ def _as_bgr8(image) -> np.ndarray:
                 f"a float image must hold values in [0, 1]; got [{lo:g}, {hi:g}] (convert "
                 "8-bit data to uint8, or divide by 255)"
             )
-        out = np.clip(np.round(im * 255.0), 0, 255).astype(np.uint8)
+        f = np.clip(im.astype(np.float64), 0.0, 1.0) * 255.0
     else:
         raise ValueError(f"image dtype must be uint8, uint16 or float, got {im.dtype}")
-    if out.shape[2] == 1:
-        out = np.repeat(out, 3, axis=2)
-    elif out.shape[2] == 4:
-        out = out[:, :, :3]
-    return np.ascontiguousarray(out)
+    if f.shape[2] == 1:
+        f = np.repeat(f, 3, axis=2)
+    elif f.shape[2] == 4:
+        f = f[:, :, :3]
+    f = np.ascontiguousarray(f)
+    u8 = im[:, :, :3] if im.dtype == np.uint8 and im.shape[2] >= 3 else np.clip(np.round(f), 0, 255).astype(np.uint8)
+    return np.ascontiguousarray(u8), f
 
 
 def _check_boxes(boxes, shape) -> list[tuple[int, int, int, int]]:
@@ -567,7 +570,8 @@ def _grabcut(img: np.ndarray, mask: np.ndarray | None, rect, iterations: int) ->
     return (m == cv2.GC_FGD) | (m == cv2.GC_PR_FGD)
 
 
-def _largest_component(fg: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
+def _largest_component(fg: np.ndarray) -> np.ndarray:
+    """The largest 8-connected component of ``fg``, holes filled."""
     n, lab, stats, _ = cv2.connectedComponentsWithStats(fg.astype(np.uint8), connectivity=8)
     if n <= 1:
         return np.zeros_like(fg, dtype=bool)
@@ -596,12 +600,12 @@ def _soft_alpha(img: np.ndarray, fg: np.ndarray, *, rounds: int = 1, sigma: floa
     fell from 0.13 px RMS without extrapolation to 0.04 px with a factor 2, which was
     also better than 1.5 or 2.5; ``sigma`` 1.2 px and one round were better than 0.6 to
     0.8 px and two or three rounds).  ``a`` is the projection of the colour onto the
-    segment ``B -> F``.  The
-    binary value is kept where the model does not fit: contrast ``|F - B|`` below 12
-    levels, a colour farther than ``max(12, 0.3 |F - B|)`` from the segment, or local
-    colour spread above ``0.25 |F - B|``.  Repeated ``rounds`` times from ``a >= 0.5``.
+    segment ``B -> F``.  The binary value is kept where the model does not fit: contrast
+    ``|F - B|`` below 12 levels, a colour farther than ``max(12, 0.3 |F - B|)`` from the
+    segment, or local colour spread above ``0.25 |F - B|``.  Repeated ``rounds`` times
+    from ``a >= 0.5``.  ``img`` is float64 BGR in 8-bit units (0-255).
     """
-    I = img.astype(np.float32)
+    I = np.asarray(img, dtype=np.float64)
     alpha = fg.astype(np.float64)
 
     def wmean(src):
@@ -617,18 +621,18 @@ def _soft_alpha(img: np.ndarray, fg: np.ndarray, *, rounds: int = 1, sigma: floa
         u8 = cur.astype(np.uint8)
         din = cv2.distanceTransform(u8, cv2.DIST_L2, 5)
         dout = cv2.distanceTransform(1 - u8, cv2.DIST_L2, 5)
-        f2 = ((din >= 1.5) & (din < 2.5)).astype(np.float32)
-        f3 = ((din >= 2.5) & (din < 3.5)).astype(np.float32)
+        f2 = ((din >= 1.5) & (din < 2.5)).astype(np.float64)
+        f3 = ((din >= 2.5) & (din < 3.5)).astype(np.float64)
         wf, Fm, vf = wmean(np.maximum(f2, f3))
-        wb, Bc, vb = wmean(((dout >= 1.5) & (dout < 3.5)).astype(np.float32))
+        wb, Bc, vb = wmean(((dout >= 1.5) & (dout < 3.5)).astype(np.float64))
         w2, F2, _ = wmean(f2)
         w3, F3, _ = wmean(f3)
         have2 = w2 > 1e-3
         grad = np.where((have2 & (w3 > 1e-3))[:, :, None], F2 - F3, 0.0)
         Fc = np.where(have2[:, :, None], F2, Fm) + extrapolate * grad
-        d = (Fc - Bc).astype(np.float64)
+        d = Fc - Bc
         d2 = np.sum(d * d, axis=2)
-        e = (I - Bc).astype(np.float64)
+        e = I - Bc
         a = np.sum(e * d, axis=2) / np.maximum(d2, 1e-9)
         res = np.sqrt(np.maximum(np.sum(e * e, axis=2) - a * a * d2, 0.0))
         c = np.sqrt(d2)
@@ -648,8 +652,9 @@ def _crop_box(box, shape, margin_frac=0.15, margin_min=12):
     return max(0, x0 - m), max(0, y0 - m), min(W, x1 + m + 1), min(H, y1 + m + 1)
 
 
-def _object_from_box(img, box, k, *, iterations, min_area, smooth, border, refine, init=None):
-    """Outline of the object in ``box`` (or None, with a warning, when refused)."""
+def _object_from_box(img, imgf, box, k, *, iterations, min_area, smooth, border, refine, init=None):
+    """Outline of the object in ``box`` (or None, with a warning, when refused); ``img`` is
+    the uint8 image, ``imgf`` the same in float64."""
     H, W = img.shape[:2]
     cx0, cy0, cx1, cy1 = _crop_box(box, (H, W))
     crop = np.ascontiguousarray(img[cy0:cy1, cx0:cx1])
@@ -684,7 +689,7 @@ def _object_from_box(img, box, k, *, iterations, min_area, smooth, border, refin
                 stacklevel=3,
             )
             return None
-    alpha = _soft_alpha(crop, fg) if refine else fg.astype(np.float64)
+    alpha = _soft_alpha(imgf[cy0:cy1, cx0:cx1], fg) if refine else fg.astype(np.float64)
     # the crop is only a window: pad it with background where it is not at the image border
     pad = ((3 if cy0 > 0 else 0, 3 if cy1 < H else 0), (3 if cx0 > 0 else 0, 3 if cx1 < W else 0))
     big = np.pad(alpha, pad, mode="constant")
@@ -766,11 +771,13 @@ def outlines_from_image(
         One box per object, in pixels (top-left and bottom-right corners, inclusive),
         enclosing the whole object with a margin of a few pixels.  Each object is
         segmented by ``cv2.grabCut`` initialised with its box.  Without boxes the
-        objects are found automatically: GrabCut initialised with the whole image minus
-        a border band (1.5 % of the smaller side, at least 5 px) as probable foreground, at most 640 px
-        wide; its connected regions that look like solid objects (area >= 0.2 % of the
-        image, solidity >= 0.35, clear of the border band) are then segmented again at
-        full resolution, each from its own region.
+        objects are found automatically: GrabCut on the image (reduced to at most 640 px
+        wide) initialised with all of it but a border band (1.5 % of the smaller side,
+        at least 5 px) as probable foreground; its connected regions that look like
+        solid objects (area >= 0.2 % of the image, solidity >= 0.35, clear of the border
+        band) are then segmented again at full resolution, each from its own region.
+        A plain background that reaches the image border all round works best; objects
+        must not touch each other (touching objects give one merged outline).
     min_area : float
         Smallest object kept, pixels^2.
     smooth : float
@@ -800,13 +807,13 @@ def outlines_from_image(
     min_area, smooth = _check_options(min_area, smooth, border)
     if not (isinstance(iterations, (int, np.integer)) and 1 <= int(iterations) <= 50):
         raise ValueError(f"iterations must be an int between 1 and 50, got {iterations!r}")
-    img = _as_bgr8(image)
+    img, imgf = _as_bgr(image)
     H, W = img.shape[:2]
     out = []
     if boxes is not None:
         bxs = _check_boxes(boxes, (H, W))
         for k, b in enumerate(bxs):
-            p = _object_from_box(img, b, k, iterations=int(iterations), min_area=min_area,
+            p = _object_from_box(img, imgf, b, k, iterations=int(iterations), min_area=min_area,
                                  smooth=smooth, border=border, refine=refine)
             if p is not None:
                 out.append(p)
@@ -839,7 +846,7 @@ def outlines_from_image(
         init[_erode(m, 2 * r)] = cv2.GC_FGD
         ib = (max(0, int(box[0]) - 2 * r), max(0, int(box[1]) - 2 * r),
               min(W - 1, int(math.ceil(box[2])) + 2 * r), min(H - 1, int(math.ceil(box[3])) + 2 * r))
-        p = _object_from_box(img, ib, k, iterations=int(iterations), min_area=min_area,
+        p = _object_from_box(img, imgf, ib, k, iterations=int(iterations), min_area=min_area,
                              smooth=smooth, border=border, refine=refine, init=init)
         if p is not None:
             out.append(p)

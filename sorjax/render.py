@@ -22,8 +22,12 @@ Conventions
   ``l_s``, ``v_x`` and homology of that view.
 * Shading is only meant to look plausible (it is not used as ground truth): a
   Lambertian-looking profile across each object (its surface normal is approximated
-  from the position between the outline's two sides about the image of the axis), a
-  specular stripe, a darker base.
+  from the position between the outline's two sides about the image of the axis, so
+  like a real shaded body the colour changes fastest right at the limb, and the side
+  away from the light is dark there), a specular stripe, a slight gradient along the
+  axis.  Objects are drawn far to near; a nearer object hides what it covers of the
+  ones behind (their coverage is reduced accordingly and they are marked occluded).
+  No shadows.
 
 Everything random takes a seed; the same arguments give the same image.
 """
@@ -40,6 +44,7 @@ import numpy as np
 from . import scenes as _sc
 
 __all__ = [
+    "PALETTE",
     "TableObject",
     "RenderedObject",
     "Rendering",
@@ -305,9 +310,8 @@ def _background(K, Rc, tc, shape, rng, table_colour, wall_colour):
     return img
 
 
-def _object_colour_field(truth, base, shape, box, rng, light_angle):
-    """Shaded colour of an object on the pixels of ``box`` (float BGR, full image size)."""
-    H, W = shape
+def _object_colour_field(truth, base, box, light_angle):
+    """Shaded colour (float BGR, 0-255) of an object on the pixels of ``box`` (inclusive)."""
     x0, y0, x1, y1 = box
     l = truth.l_s
     o = truth.outline
@@ -477,7 +481,7 @@ def _render_placed(K, Rc, tc, items, w, h, seed, noise, blur, supersample, table
         box = (max(0, int(math.floor(o[:, 0].min())) - 1), max(0, int(math.floor(o[:, 1].min())) - 1),
                min(w - 1, int(math.ceil(o[:, 0].max())) + 1), min(h - 1, int(math.ceil(o[:, 1].max())) + 1))
         x0, y0, x1, y1 = box
-        col = _object_colour_field(truth, colour, (h, w), box, rng, light)
+        col = _object_colour_field(truth, colour, box, light)
         a = cov[y0 : y1 + 1, x0 : x1 + 1, None]
         img[y0 : y1 + 1, x0 : x1 + 1] = a * col + (1.0 - a) * img[y0 : y1 + 1, x0 : x1 + 1]
         for j in range(len(placed)):  # hide what it covers of the objects behind it
