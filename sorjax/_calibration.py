@@ -172,8 +172,6 @@ def _linear_once(homologies, method: str, T: np.ndarray, a: float, weights=None)
     A = np.diag([1.0 / a, 1.0, 1.0])
     v = np.stack([np.asarray(h.v_x) for h in homologies]) @ (T @ A).T
     l = np.stack([np.asarray(h.l_s) for h in homologies]) @ np.linalg.inv(T @ A)
-    if method == "I":  # Method I has no l_x for a view whose v_x is at infinity: leave it out
-        v[[i for i, h in enumerate(homologies) if h.v_x_at_infinity], 2] = 0.0
     v, l = jnp.asarray(v), jnp.asarray(l)
     if method == "I":
         fu, fv, u0, v0, ok = method_i(v, l)
@@ -290,19 +288,22 @@ def _linearised_covariance(outs, homologies, K, T, aspect_ratio, n_samples):
 
 # A view is dropped as "not a surface of revolution" when its per-view symmetry
 # residual (eq. 20, RMS) exceeds ASYMMETRY_PX *and* ASYMMETRY_REL of the outline's
-# RMS radius.  Measured (experiments/degenerate.py): exact outlines of random SORs fit
-# to ~1e-5 px; with the paper's noise of sigma = 2 px the residual stayed below 0.7 px,
-# with i.i.d. Gaussian noise of 2 px below 1.8 px; random asymmetric blobs gave
-# 0.1 to 10 px, so only clearly asymmetric outlines are caught (a mild asymmetry is
-# indistinguishable from noise by this residual).  Between WARN_ASYMMETRY_PX and the
+# RMS radius.  Measured (experiments/degenerate.py, 24 views of random SORs): exact
+# outlines fit to < 4e-5 px; with the paper's noise of sigma = 2 px the residual stays
+# below 0.7 px, with i.i.d. Gaussian noise of 2 px below 1.4 px (1.8 px in a wider
+# probe); smooth random blobs gave 2.6 px (median; 75 % above 2 px) for a radius
+# modulation of 20 %, 4.8 px (all above 2 px) for 35 %.  So only clearly asymmetric
+# outlines are caught: a mild asymmetry is indistinguishable from noise by this
+# residual.  Between WARN_ASYMMETRY_PX and the
 # threshold the view is kept with a warning.
 ASYMMETRY_PX = 2.0
 ASYMMETRY_REL = 0.01
 WARN_ASYMMETRY_PX = 1.0
 # An intrinsic is "not determined" when its standard deviation (the covariance at the
-# estimate, scaled by the actual residual) is infinite or above UNDETERMINED times the
-# focal length (for the principal point: times the outlines' RMS radius when the focal
-# length itself is not determined): a 3-sigma interval reaching zero.
+# estimate, scaled by the residual but at least RESIDUAL_FLOOR_PX) is infinite or above
+# UNDETERMINED times the focal length (for the principal point: times the outlines'
+# RMS radius when the focal length itself is not determined): a 3-sigma interval
+# reaching zero.
 UNDETERMINED = 1.0 / 3.0
 # Weak geometry: warn when the relative standard deviation of a focal length exceeds
 # WEAK_REL_STD, the covariance scaled by the residual but at least RESIDUAL_FLOOR_PX
@@ -413,15 +414,16 @@ def _assess(K, cov_unit, s_px, outs, vx, ls, free_aspect: bool, used=None):
     K = np.asarray(K)
     est = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
     var = np.diag(np.asarray(cov_unit))
+    s_floor = max(s_px, RESIDUAL_FLOOR_PX)
     std = np.where(np.isfinite(var), np.sqrt(np.abs(var)), np.inf) * s_px
+    std_floor = std / max(s_px, 1e-300) * s_floor
     radius = np.sqrt(np.mean([_outline_radius(o) ** 2 for o in outs]))
-    focal_ok = np.isfinite(std[:2]) & (std[:2] <= UNDETERMINED * np.abs(est[:2]))
+    focal_ok = np.isfinite(std[:2]) & (std_floor[:2] <= UNDETERMINED * np.abs(est[:2]))
     ref = np.sqrt(abs(est[0] * est[1])) if focal_ok.all() else radius
-    pp_ok = np.isfinite(std[2:]) & (std[2:] <= UNDETERMINED * ref)
+    pp_ok = np.isfinite(std[2:]) & (std_floor[2:] <= UNDETERMINED * ref)
     determined = np.concatenate([focal_ok, pp_ok])
     weak = None
-    s_floor = max(s_px, RESIDUAL_FLOOR_PX)
-    rel_floor = std[:2] / max(s_px, 1e-300) * s_floor / np.abs(est[:2])
+    rel_floor = std_floor[:2] / np.abs(est[:2])
     aspect_weak = free_aspect and not determined.all()
     if determined.all() and np.max(rel_floor) > WEAK_REL_STD:
         weak = float(np.max(rel_floor))
@@ -510,16 +512,15 @@ def calibrate(
       residual above ``ASYMMETRY_PX`` px and ``ASYMMETRY_REL`` of its radius) are
       dropped with a warning naming them (``Calibration.dropped``); fewer than two
       left gives ``RESULTS.too_few_views``;
-    * when every view's ``v_x`` is at infinity (:attr:`Homology.v_x_at_infinity`),
-      only the principal point is estimable: ``RESULTS.only_principal_point``, with
-      the least-squares intersection of the ``l_s`` in ``K[:2, 2]`` and NaN focal
-      lengths;
-    * otherwise the estimate's covariance (the bundle's; for the linear methods the
-      bundle's linearisation at their estimate) says which intrinsics the views
-      determine: one with an infinite standard deviation or one above a third of the
-      focal length is reported NaN, with ``RESULTS.only_principal_point`` (both focal
-      lengths) or ``RESULTS.degenerate``; ``Calibration.details`` says which and what
-      view to add;
+    * the estimate's covariance (the bundle's; for the linear methods the bundle's
+      linearisation at their estimate) says which intrinsics the views determine: one
+      with an infinite standard deviation or one above a third of the focal length is
+      reported NaN, with ``RESULTS.only_principal_point`` (both focal lengths) or
+      ``RESULTS.degenerate``; ``Calibration.details`` says which and what view to add;
+    * when, in addition, every view's ``v_x`` is at infinity
+      (:attr:`Homology.v_x_at_infinity`) -- or the estimate failed -- only the principal
+      point is estimable: ``RESULTS.only_principal_point`` with the least-squares
+      intersection of the ``l_s`` in ``K[:2, 2]`` and NaN focal lengths;
     * a successful calibration whose focal length has a relative standard deviation
       above ``WEAK_REL_STD`` (5 %; residual taken as at least 0.1 px) gives a warning
       saying what kind of extra view would help.
@@ -598,8 +599,9 @@ def calibrate(
     vx_h = np.stack([np.asarray(h.v_x) for h in homs_u])
     ls_h = np.stack([np.asarray(h.l_s) for h in homs_u])
 
-    # every v_x at infinity: only the principal point (where the l_s meet) is estimable
-    if all(h.v_x_at_infinity for h in homs_u):
+    def principal_point_only():
+        """Every v_x at infinity and the estimate cannot fix the focal length: the
+        principal point is where the imaged axes meet (paper, Section 6)."""
         pp, cov_pp, spread = _ls_intersection(ls_h)
         vs = ", ".join(str(i) for i in used)
         if not np.all(np.isfinite(pp)):
@@ -623,6 +625,9 @@ def calibrate(
         return finish(_nan_calibration(homologies, RESULTS.only_principal_point, method, a, used, details, dropped,
                                        notes, K=K, cov=cov, rms=rms_u, vx=vx_h, ls=ls_h))
 
+    # every v_x at infinity (within its uncertainty): only the principal point is
+    # estimable, unless the joint estimate below does determine the focal length
+    all_at_infinity = all(h.v_x_at_infinity for h in homs_u)
     T = normalising_transform(np.concatenate([np.asarray(o.points) for o in outs_u]))
     if method == "bundle":
         K, omega, code, cov, cost, view_rms, steps, vx, ls, s_px = _bundle_calibration(
@@ -640,10 +645,14 @@ def calibrate(
 
     details = ""
     K_np = np.asarray(K)
-    if cov_unit is not None and np.all(np.isfinite(K_np)) and K_np[0, 0] > 0 and K_np[1, 1] > 0:
+    assessed = cov_unit is not None and np.all(np.isfinite(K_np)) and K_np[0, 0] > 0 and K_np[1, 1] > 0
+    if assessed:
         determined, std, weak, advice = _assess(
             K_np, cov_unit, s_px, outs_u, np.asarray(vx), np.asarray(ls), free_aspect, used
         )
+    if all_at_infinity and (not bool(code == RESULTS.successful) or not assessed or not determined[:2].all()):
+        return principal_point_only()
+    if assessed:
         est = [K_np[0, 0], K_np[1, 1], K_np[0, 2], K_np[1, 2]]
         if not determined.all():
             code = RESULTS.only_principal_point if (not determined[:2].any() and determined[2:].all()) else RESULTS.degenerate
