@@ -1,0 +1,106 @@
+"""Writing a calibration: OpenCV FileStorage YAML, a JSON twin, overlay images."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+NAMES = ("fu", "fv", "u0", "v0")
+
+
+def write_camera(cal, path, image_size: tuple[int, int], sources=()) -> tuple[Path, Path]:
+    """Write ``cal`` to ``path`` (OpenCV FileStorage YAML: ``camera_matrix``,
+    ``image_width``, ``image_height``, ``intrinsics_std`` = std of (fu, fv, u0, v0)
+    in px, ``distortion_coefficients`` = zeros (not estimated), ``method``) and to
+    the same path with suffix ``.json``.  Returns both paths."""
+    import cv2
+
+    path = Path(path)
+    if path.suffix.lower() not in (".yaml", ".yml", ".xml"):
+        path = path.with_suffix(".yaml")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    K = np.asarray(cal.K, dtype=np.float64)
+    std = np.asarray(cal.std, dtype=np.float64).reshape(1, 4)
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    try:
+        fs.write("image_width", int(image_size[0]))
+        fs.write("image_height", int(image_size[1]))
+        fs.write("camera_matrix", K)
+        fs.write("intrinsics_std", std)
+        fs.write("distortion_coefficients", np.zeros((1, 5)))
+        fs.write("method", str(cal.method))
+        fs.write("views_used", int(len(cal.used)))
+    finally:
+        fs.release()
+    twin = path.with_suffix(".json")
+    twin.write_text(json.dumps(dict(
+        image_width=int(image_size[0]), image_height=int(image_size[1]), camera_matrix=K.tolist(),
+        intrinsics=dict(zip(NAMES, map(float, (cal.fu, cal.fv, cal.u0, cal.v0)))),
+        intrinsics_std=dict(zip(NAMES, [None if not np.isfinite(s) else float(s) for s in std[0]])),
+        method=cal.method, aspect_ratio=cal.aspect_ratio, success=bool(cal.success), message=cal.message,
+        views=[dict(source=str(src), used=i in cal.used) for i, src in enumerate(sources)],
+        dropped=[dict(view=int(i), reason=r) for i, r in getattr(cal, "dropped", ())],
+        view_rms_px=[float(x) for x in np.asarray(cal.view_rms)],
+    ), indent=1))
+    return path, twin
+
+
+def _clip_line(l, w, h):
+    pts = []
+    for x in (0.0, w - 1.0):
+        if abs(l[1]) > 1e-12:
+            y = -(l[0] * x + l[2]) / l[1]
+            if 0 <= y <= h - 1:
+                pts.append((x, y))
+    for y in (0.0, h - 1.0):
+        if abs(l[0]) > 1e-12:
+            x = -(l[1] * y + l[2]) / l[0]
+            if 0 <= x <= w - 1:
+                pts.append((x, y))
+    return (pts[0], pts[-1]) if len(pts) >= 2 else None
+
+
+def draw_overlay(image, views, path) -> Path:
+    """Draw each view's outline (green), its axis ``l_s`` (magenta), five transferred
+    point pairs ``x <-> W x`` (yellow) and an arrow towards ``v_x`` (red) on a copy of
+    ``image`` (BGR) and write it to ``path``.  ``views``: ``(outline, l_s, v_x, label)``
+    in pixels."""
+    import cv2
+
+    img = np.ascontiguousarray(image).copy()
+    if img.ndim == 2:
+        img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+    if img.dtype != np.uint8:
+        img = np.clip(img * (255.0 if img.max() <= 1.0 else 1.0), 0, 255).astype(np.uint8)
+    h, w = img.shape[:2]
+    sh = 4  # fixed-point bits for sub-pixel drawing
+    pix = lambda p: tuple(int(round(c * (1 << sh))) for c in p)  # noqa: E731
+    for outline, l, v, label in views:
+        o = np.asarray(outline, dtype=np.float64)
+        cv2.polylines(img, [np.round(o * (1 << sh)).astype(np.int32)], True, (0, 200, 0), 1, cv2.LINE_AA, sh)
+        if l is None:
+            continue
+        l, v = np.asarray(l, dtype=np.float64), np.asarray(v, dtype=np.float64)
+        seg = _clip_line(l, w, h)
+        if seg:
+            cv2.line(img, pix(seg[0]), pix(seg[1]), (255, 0, 255), 1, cv2.LINE_AA, sh)
+        W = np.eye(3) - 2.0 * np.outer(v, l) / (v @ l)
+        for p in o[np.linspace(0, len(o), 6, endpoint=False).astype(int)[1:]]:
+            q = W @ np.array([p[0], p[1], 1.0])
+            if abs(q[2]) > 1e-12:
+                q = q[:2] / q[2]
+                cv2.line(img, pix(p), pix(q), (0, 220, 255), 1, cv2.LINE_AA, sh)
+                cv2.circle(img, pix(q), 3 << sh, (0, 220, 255), 1, cv2.LINE_AA, sh)
+        c = o.mean(0)
+        d = v[:2] - c * v[2]
+        d = d / (np.linalg.norm(d) + 1e-300)
+        cv2.arrowedLine(img, pix(c), pix(c + 50 * d), (0, 0, 255), 2, cv2.LINE_AA, sh, 0.3)
+        cv2.putText(img, label, (int(c[0]) + 5, int(c[1]) - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 255), 1,
+                    cv2.LINE_AA)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(path), img):
+        raise ValueError(f"{path}: could not write the overlay image")
+    return path
