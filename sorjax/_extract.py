@@ -584,29 +584,29 @@ def _largest_component(fg: np.ndarray) -> np.ndarray:
     return filled.astype(bool)
 
 
-def _soft_alpha(img: np.ndarray, fg: np.ndarray, *, rounds: int = 1, sigma: float = 1.2,
+def _soft_alpha(img: np.ndarray, fg: np.ndarray, *, inner: float = 1.5, sigma: float = 1.2,
                 extrapolate: float = 2.0) -> np.ndarray:
     """Soft mask: the binary segmentation ``fg`` refined by unmixing its boundary pixels.
 
-    A pixel next to the boundary (within 1.5 px) is modelled as ``a F + (1 - a) B``: ``a``
-    the fraction of it that the object covers, ``F`` and ``B`` the local object and
-    background colours.  ``B`` is the Gaussian-weighted (``sigma`` px) mean colour of the
-    background pixels 1.5 to 3.5 px from the boundary; ``F`` is the same mean over the
-    object's pixels 1.5 to 2.5 px inside (``F2``), extrapolated towards the edge by
-    ``extrapolate`` times the difference ``F2 - F3`` with the next ring in (2.5 to 3.5
-    px): shaded objects darken or brighten fast towards their limb, like ``sqrt`` of
-    the distance to it, and an unextrapolated ``F`` moves the edge of the darker side
-    inwards (on renders at f = 1500 px the left-right asymmetry of the outline error
-    fell from 0.13 px RMS without extrapolation to 0.04 px with a factor 2, which was
-    also better than 1.5 or 2.5; ``sigma`` 1.2 px and one round were better than 0.6 to
-    0.8 px and two or three rounds).  ``a`` is the projection of the colour onto the
-    segment ``B -> F``.  The binary value is kept where the model does not fit: contrast
-    ``|F - B|`` below 12 levels, a colour farther than ``max(12, 0.3 |F - B|)`` from the
-    segment, or local colour spread above ``0.25 |F - B|``.  Repeated ``rounds`` times
-    from ``a >= 0.5``.  ``img`` is float64 BGR in 8-bit units (0-255).
+    A pixel near the boundary (closer than ``inner`` px) is modelled as
+    ``a F + (1 - a) B``: ``a`` the fraction of it that the object covers (blurred by the
+    camera's point-spread function, whose 0.5 level is still the edge), ``F`` and ``B``
+    the local object and background colours.  ``B`` is the Gaussian-weighted (``sigma``
+    px) mean colour of the background pixels ``inner`` to ``inner + 2`` px from the
+    boundary; ``F`` is the same mean over the object's pixels ``inner`` to ``inner + 1``
+    px inside (``F2``), extrapolated towards the edge by ``extrapolate`` times the
+    difference ``F2 - F3`` with the next ring in: shaded objects darken or brighten
+    fast towards their limb, like ``sqrt`` of the distance to it, and an
+    unextrapolated ``F`` moves the edge of the darker side inwards (on renders at
+    f = 1500 px the left-right asymmetry of the outline error fell from 0.13 px RMS
+    without extrapolation to 0.04 px with a factor 2, which was also better than 1.5 or
+    2.5; ``sigma`` 1.2 px was better than 0.6 to 0.8 px, one round better than two or
+    three).  ``a`` is the projection of the colour onto the segment ``B -> F``.  The
+    binary value is kept where the model does not fit: contrast ``|F - B|`` below 12
+    levels, a colour farther than ``max(12, 0.3 |F - B|)`` from the segment, or local
+    colour spread above ``0.25 |F - B|``.  ``img`` is float64 BGR in 8-bit units.
     """
     I = np.asarray(img, dtype=np.float64)
-    alpha = fg.astype(np.float64)
 
     def wmean(src):
         w = cv2.GaussianBlur(src, (0, 0), sigma)
@@ -614,35 +614,77 @@ def _soft_alpha(img: np.ndarray, fg: np.ndarray, *, rounds: int = 1, sigma: floa
         m2 = cv2.GaussianBlur(np.sum(I * I, axis=2) * src, (0, 0), sigma) / np.maximum(w, 1e-6)
         return w, m, np.maximum(m2 - np.sum(m * m, axis=2), 0.0)
 
-    for _ in range(rounds):
-        cur = alpha >= 0.5
-        if not cur.any() or cur.all():
-            return alpha
-        u8 = cur.astype(np.uint8)
-        din = cv2.distanceTransform(u8, cv2.DIST_L2, 5)
-        dout = cv2.distanceTransform(1 - u8, cv2.DIST_L2, 5)
-        f2 = ((din >= 1.5) & (din < 2.5)).astype(np.float64)
-        f3 = ((din >= 2.5) & (din < 3.5)).astype(np.float64)
-        wf, Fm, vf = wmean(np.maximum(f2, f3))
-        wb, Bc, vb = wmean(((dout >= 1.5) & (dout < 3.5)).astype(np.float64))
-        w2, F2, _ = wmean(f2)
-        w3, F3, _ = wmean(f3)
-        have2 = w2 > 1e-3
-        grad = np.where((have2 & (w3 > 1e-3))[:, :, None], F2 - F3, 0.0)
-        Fc = np.where(have2[:, :, None], F2, Fm) + extrapolate * grad
-        d = Fc - Bc
-        d2 = np.sum(d * d, axis=2)
-        e = I - Bc
-        a = np.sum(e * d, axis=2) / np.maximum(d2, 1e-9)
-        res = np.sqrt(np.maximum(np.sum(e * e, axis=2) - a * a * d2, 0.0))
-        c = np.sqrt(d2)
-        near = ((din > 0) & (din <= 1.5)) | ((dout > 0) & (dout <= 1.5))
-        ok = (near & (wf > 1e-3) & (wb > 1e-3) & (c >= 12.0) & (res <= np.maximum(12.0, 0.3 * c))
-              & (np.sqrt(np.maximum(vf, vb)) <= 0.25 * c))
-        new = cur.astype(np.float64)
-        new[ok] = np.clip(a[ok], 0.0, 1.0)
-        alpha = new
+    cur = np.asarray(fg, dtype=bool)
+    if not cur.any() or cur.all():
+        return cur.astype(np.float64)
+    u8 = cur.astype(np.uint8)
+    din = cv2.distanceTransform(u8, cv2.DIST_L2, 5)
+    dout = cv2.distanceTransform(1 - u8, cv2.DIST_L2, 5)
+    f2 = ((din >= inner) & (din < inner + 1)).astype(np.float64)
+    f3 = ((din >= inner + 1) & (din < inner + 2)).astype(np.float64)
+    wf, Fm, vf = wmean(np.maximum(f2, f3))
+    wb, Bc, vb = wmean(((dout >= inner) & (dout < inner + 2)).astype(np.float64))
+    w2, F2, _ = wmean(f2)
+    w3, F3, _ = wmean(f3)
+    have2 = w2 > 1e-3
+    grad = np.where((have2 & (w3 > 1e-3))[:, :, None], F2 - F3, 0.0)
+    Fc = np.where(have2[:, :, None], F2, Fm) + extrapolate * grad
+    d = Fc - Bc
+    d2 = np.sum(d * d, axis=2)
+    e = I - Bc
+    a = np.sum(e * d, axis=2) / np.maximum(d2, 1e-9)
+    res = np.sqrt(np.maximum(np.sum(e * e, axis=2) - a * a * d2, 0.0))
+    c = np.sqrt(d2)
+    near = ((din > 0) & (din < inner)) | ((dout > 0) & (dout < inner))
+    ok = (near & (wf > 1e-3) & (wb > 1e-3) & (c >= 12.0) & (res <= np.maximum(12.0, 0.3 * c))
+          & (np.sqrt(np.maximum(vf, vb)) <= 0.25 * c))
+    alpha = cur.astype(np.float64)
+    alpha[ok] = np.clip(a[ok], 0.0, 1.0)
     return alpha
+
+
+def _gradient_magnitude(img: np.ndarray, sigma: float) -> np.ndarray:
+    g = cv2.GaussianBlur(img, (0, 0), sigma)
+    gx = cv2.Sobel(g, cv2.CV_64F, 1, 0, ksize=1) / 2.0
+    gy = cv2.Sobel(g, cv2.CV_64F, 0, 1, ksize=1) / 2.0
+    return np.sqrt(np.sum(gx * gx + gy * gy, axis=2))
+
+
+def _edge_sharpness(img: np.ndarray, fg: np.ndarray) -> float:
+    """How wide the colour edges along the boundary of ``fg`` are (see :func:`_inner_band`).
+
+    The median, over the boundary pixels with the stronger half of the gradients, of
+    the largest colour-gradient magnitude within 2 px after a Gaussian blur of 1.5 px
+    divided by the same after 0.7 px; the step response gives about
+    ``sqrt((s^2 + 0.49) / (s^2 + 2.25))`` for an edge of width (sigma) ``s``: larger for
+    blurred edges."""
+    u8 = np.asarray(fg, dtype=np.uint8)
+    din = cv2.distanceTransform(u8, cv2.DIST_L2, 5)
+    dout = cv2.distanceTransform(1 - u8, cv2.DIST_L2, 5)
+    edge = ((din > 0) & (din <= 1)) | ((dout > 0) & (dout <= 1))
+    if not edge.any():
+        return float("nan")
+    k = np.ones((5, 5), np.uint8)
+    fine = cv2.dilate(_gradient_magnitude(img, 0.7), k)[edge]
+    coarse = cv2.dilate(_gradient_magnitude(img, 1.5), k)[edge]
+    strong = fine >= np.median(fine)
+    return float(np.median(coarse[strong] / np.maximum(fine[strong], 1e-9)))
+
+
+def _inner_band(ratios: list[float]) -> float:
+    """Band of :func:`_soft_alpha` for an image, from its objects' edge sharpness.
+
+    A sharp edge (box pixels, little blur) mixes colours within about a pixel across
+    it; an edge blurred by a point-spread function of sigma ~0.8 px or more mixes them
+    over two or three, which the 1.5 px band truncates (on renders blurred by 0.8 px:
+    0.44 px RMS error with it, 0.21 px with a 2.5 px band, which on sharp renders is
+    worse: 0.15 px against 0.12).  The per-object sharpness ratios of
+    :func:`_edge_sharpness` were 0.51-0.58 on sharp renders (one object with a dark,
+    low-contrast side: 0.70), 0.55-0.61 at a blur of 0.5 px (where both bands do about
+    as well), 0.62-0.67 at 0.8 px; their median over the image's objects above 0.615
+    selects the 2.5 px band."""
+    r = [v for v in ratios if np.isfinite(v)]
+    return 2.5 if r and float(np.median(r)) > 0.615 else 1.5
 
 
 def _crop_box(box, shape, margin_frac=0.15, margin_min=12):
@@ -652,9 +694,9 @@ def _crop_box(box, shape, margin_frac=0.15, margin_min=12):
     return max(0, x0 - m), max(0, y0 - m), min(W, x1 + m + 1), min(H, y1 + m + 1)
 
 
-def _object_from_box(img, imgf, box, k, *, iterations, min_area, smooth, border, refine, init=None):
-    """Outline of the object in ``box`` (or None, with a warning, when refused); ``img`` is
-    the uint8 image, ``imgf`` the same in float64."""
+def _segment_box(img, box, k, *, iterations, min_area, init=None):
+    """GrabCut of the object in ``box``: ``(crop window, foreground in it)``, or None with a
+    warning when nothing usable is found or the box cuts the object."""
     H, W = img.shape[:2]
     cx0, cy0, cx1, cy1 = _crop_box(box, (H, W))
     crop = np.ascontiguousarray(img[cy0:cy1, cx0:cx1])
@@ -689,7 +731,15 @@ def _object_from_box(img, imgf, box, k, *, iterations, min_area, smooth, border,
                 stacklevel=3,
             )
             return None
-    alpha = _soft_alpha(imgf[cy0:cy1, cx0:cx1], fg) if refine else fg.astype(np.float64)
+    return (cx0, cy0, cx1, cy1), fg
+
+
+def _finish(imgf, box, k, window, fg, *, inner, min_area, smooth, border):
+    """Outline (pixels, whole-image coordinates) of a segmented object, or None with a
+    warning; ``inner`` is the unmixing band (None: no refinement, the binary mask)."""
+    H, W = imgf.shape[:2]
+    cx0, cy0, cx1, cy1 = window
+    alpha = fg.astype(np.float64) if inner is None else _soft_alpha(imgf[cy0:cy1, cx0:cx1], fg, inner=inner)
     # the crop is only a window: pad it with background where it is not at the image border
     pad = ((3 if cy0 > 0 else 0, 3 if cy1 < H else 0), (3 if cx0 > 0 else 0, 3 if cx1 < W else 0))
     big = np.pad(alpha, pad, mode="constant")
@@ -699,7 +749,7 @@ def _object_from_box(img, imgf, box, k, *, iterations, min_area, smooth, border,
     except ValueError as err:
         if border == "raise":
             raise ValueError(f"box {k} {tuple(box)}: {err}") from None
-        warnings.warn(f"box {k} {tuple(box)}: {err}", stacklevel=3)
+        warnings.warn(f"box {k} {tuple(box)}: {err}", stacklevel=4)
         return None
     p = outs[0] + np.array([cx0 - pad[1][0], cy0 - pad[0][0]], dtype=np.float64)
     return p
@@ -750,6 +800,19 @@ def _auto_candidates(img: np.ndarray, *, iterations: int, min_area: float, max_s
     return cands, s, notes
 
 
+def _finish_all(imgf, segs, *, refine, min_area, smooth, border) -> list[np.ndarray]:
+    """Outlines of the segmented objects of one image, with one unmixing band for all."""
+    inner = None
+    if refine and segs:
+        inner = _inner_band([_edge_sharpness(imgf[w[1]:w[3], w[0]:w[2]], fg) for _, _, w, fg in segs])
+    out = []
+    for k, b, w, fg in segs:
+        p = _finish(imgf, b, k, w, fg, inner=inner, min_area=min_area, smooth=smooth, border=border)
+        if p is not None:
+            out.append(p)
+    return out
+
+
 def outlines_from_image(
     image,
     boxes: Sequence[Sequence[float]] | None = None,
@@ -787,7 +850,11 @@ def outlines_from_image(
     refine : bool
         Refine the GrabCut boundary on the image itself: near the boundary each pixel
         is unmixed into local object and background colours, giving a soft mask whose
-        0.5 level set is the sub-pixel edge.  Without it the binary GrabCut mask is used.
+        0.5 level set is the sub-pixel edge (about 0.1 px RMS on sharp renders with
+        sensor noise, against 0.25 px for the GrabCut mask; the band of pixels unmixed
+        widens from 1.5 to 2.5 px when the image's edges look blurred, which keeps about
+        0.2 px at a blur of 0.8 px; more blur degrades it: about 0.5 px at 1.2 px).
+        Without it the binary GrabCut mask is used.
     iterations : int
         GrabCut iterations.
 
@@ -809,14 +876,14 @@ def outlines_from_image(
         raise ValueError(f"iterations must be an int between 1 and 50, got {iterations!r}")
     img, imgf = _as_bgr(image)
     H, W = img.shape[:2]
-    out = []
+    segs = []  # (index, box, window, foreground)
     if boxes is not None:
         bxs = _check_boxes(boxes, (H, W))
         for k, b in enumerate(bxs):
-            p = _object_from_box(img, imgf, b, k, iterations=int(iterations), min_area=min_area,
-                                 smooth=smooth, border=border, refine=refine)
-            if p is not None:
-                out.append(p)
+            sg = _segment_box(img, b, k, iterations=int(iterations), min_area=min_area)
+            if sg is not None:
+                segs.append((k, b) + sg)
+        out = _finish_all(imgf, segs, refine=refine, min_area=min_area, smooth=smooth, border=border)
         if not out:
             raise ValueError(
                 f"no object outline could be extracted from any of the {len(bxs)} boxes (see the "
@@ -846,10 +913,10 @@ def outlines_from_image(
         init[_erode(m, 2 * r)] = cv2.GC_FGD
         ib = (max(0, int(box[0]) - 2 * r), max(0, int(box[1]) - 2 * r),
               min(W - 1, int(math.ceil(box[2])) + 2 * r), min(H - 1, int(math.ceil(box[3])) + 2 * r))
-        p = _object_from_box(img, imgf, ib, k, iterations=int(iterations), min_area=min_area,
-                             smooth=smooth, border=border, refine=refine, init=init)
-        if p is not None:
-            out.append(p)
+        sg = _segment_box(img, ib, k, iterations=int(iterations), min_area=min_area, init=init)
+        if sg is not None:
+            segs.append((k, ib) + sg)
+    out = _finish_all(imgf, segs, refine=refine, min_area=min_area, smooth=smooth, border=border)
     if not out:
         raise ValueError(
             "no object outline could be extracted (see the warnings); pass boxes around the "
