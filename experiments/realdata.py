@@ -246,8 +246,10 @@ def calibrate_set(views: list[View], K_true: np.ndarray, set_name: str) -> list[
         cal = res
         used = [usable[i].label for i in cal.used]
         lines.append(head)
-        code = sorjax.RESULTS[cal.result] or "successful"
-        lines.append(f"  result: {code.split('. ')[0].rstrip('.')}.")
+        codes = ("successful", "not_positive_definite", "not_converged", "too_few_views",
+                 "degenerate", "only_principal_point")
+        code = next((c for c in codes if bool(cal.result == getattr(sorjax.RESULTS, c))), "?")
+        lines.append(f"  result: RESULTS.{code} (success={cal.success})")
         lines.append(f"  used ({len(used)}): " + ", ".join(used))
         for i, why in cal.dropped:
             lines.append(f"  dropped {usable[i].label}: {why}")
