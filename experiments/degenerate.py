@@ -333,7 +333,7 @@ def property_rates(n: int, n_extra: int, tol: float = 1e-4):
                 outs = [o[::-1] if rng.uniform() < 0.5 else o for o in outs]
                 c2 = sorjax.calibrate(outs)
                 inv.append(bool(c2.success and k_error(c2, K) < tol and cal.success
-                                and np.max(np.abs(np.asarray(c2.K) - np.asarray(cal.K))) < 2e-5 * K[1, 1]))
+                                and np.max(np.abs(np.asarray(c2.K) - np.asarray(cal.K))) < tol * K[1, 1]))
                 fl = []
                 for o in sc.outlines:
                     o = o.copy()

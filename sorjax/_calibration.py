@@ -300,10 +300,10 @@ ASYMMETRY_PX = 2.0
 ASYMMETRY_REL = 0.01
 WARN_ASYMMETRY_PX = 1.0
 # An intrinsic is "not determined" when its standard deviation (the covariance at the
-# estimate, scaled by the residual but at least RESIDUAL_FLOOR_PX) is infinite or above
-# UNDETERMINED times the focal length (for the principal point: times the outlines'
-# RMS radius when the focal length itself is not determined): a 3-sigma interval
-# reaching zero.
+# estimate, scaled by the residual -- at least RESIDUAL_FLOOR_PX when every v_x is at
+# infinity) is infinite or above UNDETERMINED times the focal length (for the
+# principal point: times the outlines' RMS radius when the focal length itself is not
+# determined): a 3-sigma interval reaching zero.
 UNDETERMINED = 1.0 / 3.0
 # Weak geometry: warn when the relative standard deviation of a focal length exceeds
 # WEAK_REL_STD, the covariance scaled by the residual but at least RESIDUAL_FLOOR_PX
@@ -407,20 +407,26 @@ def _fmt_std(x, sd):
     return f"{x:.1f} +- {sd:.2g}" if np.isfinite(sd) else f"{x:.1f} +- inf"
 
 
-def _assess(K, cov_unit, s_px, outs, vx, ls, free_aspect: bool, used=None):
+def _assess(K, cov_unit, s_px, outs, vx, ls, free_aspect: bool, used=None, floor_verdict: bool = False):
     """Which intrinsics the views determine.  Returns ``(determined (4,) bool, std (4,),
-    weak_note or None, advice)`` for the raw estimate ``K`` (pixels), the covariance
-    per px^2 of residual ``cov_unit`` and the residual standard error ``s_px``."""
+    weak or None, advice)`` for the raw estimate ``K`` (pixels), the covariance per
+    px^2 of residual ``cov_unit`` and the residual standard error ``s_px``.  ``std``
+    and the verdicts are for ``s_px`` -- or, with ``floor_verdict`` (every ``v_x`` at
+    infinity, where theory says the focal length is free), for
+    ``max(s_px, RESIDUAL_FLOOR_PX)``, so that the estimate must fix the focal length
+    robustly to override that.  ``weak`` is the relative std of a focal length at
+    ``max(s_px, RESIDUAL_FLOOR_PX)`` when above ``WEAK_REL_STD``."""
     K = np.asarray(K)
     est = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
     var = np.diag(np.asarray(cov_unit))
     s_floor = max(s_px, RESIDUAL_FLOOR_PX)
     std = np.where(np.isfinite(var), np.sqrt(np.abs(var)), np.inf) * s_px
     std_floor = std / max(s_px, 1e-300) * s_floor
+    judged = std_floor if floor_verdict else std
     radius = np.sqrt(np.mean([_outline_radius(o) ** 2 for o in outs]))
-    focal_ok = np.isfinite(std[:2]) & (std_floor[:2] <= UNDETERMINED * np.abs(est[:2]))
+    focal_ok = np.isfinite(std[:2]) & (judged[:2] <= UNDETERMINED * np.abs(est[:2]))
     ref = np.sqrt(abs(est[0] * est[1])) if focal_ok.all() else radius
-    pp_ok = np.isfinite(std[2:]) & (std_floor[2:] <= UNDETERMINED * ref)
+    pp_ok = np.isfinite(std[2:]) & (judged[2:] <= UNDETERMINED * ref)
     determined = np.concatenate([focal_ok, pp_ok])
     weak = None
     rel_floor = std_floor[:2] / np.abs(est[:2])
@@ -648,7 +654,7 @@ def calibrate(
     assessed = cov_unit is not None and np.all(np.isfinite(K_np)) and K_np[0, 0] > 0 and K_np[1, 1] > 0
     if assessed:
         determined, std, weak, advice = _assess(
-            K_np, cov_unit, s_px, outs_u, np.asarray(vx), np.asarray(ls), free_aspect, used
+            K_np, cov_unit, s_px, outs_u, np.asarray(vx), np.asarray(ls), free_aspect, used, all_at_infinity
         )
     if all_at_infinity and (not bool(code == RESULTS.successful) or not assessed or not determined[:2].all()):
         return principal_point_only()

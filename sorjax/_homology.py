@@ -101,7 +101,12 @@ class Homology(eqx.Module):
         (``|v_3| < 1e-9`` of the unit vertex in pixels) that no noise-free fit could
         place it better.  The camera then looks straight at the revolution axis (the
         outline has skew or mirror symmetry; paper, Section 6): the view constrains
-        the principal point (it lies on ``l_s``) but not the focal length."""
+        the principal point (it lies on ``l_s``) but not the focal length.
+
+        The standard error assumes independent residuals; with noise correlated along
+        the outline (or a rough, densely sampled outline) it is optimistic, so the test
+        errs towards calling ``v_x`` finite.  :func:`sorjax.calibrate` acts on it only
+        when the joint estimate cannot fix the focal length either."""
         if abs(float(self.v_x[2])) < 1e-9:
             return True
         return self.infinity_z is not None and bool(self.infinity_z < INFINITY_Z)
