@@ -199,6 +199,9 @@ def resample_closed(points: np.ndarray, n: int) -> np.ndarray:
     return h00 * p[i] + h10 * hi * tan[i] + h01 * p[j] + h11 * hi * tan[j]
 
 
+SPARSE_SPACING_PX = 3.0  # mean spacing above which a short outline is called sparse
+
+
 def make_outline(points, n_points: int = DEFAULT_POINTS, *, name: str = "outline") -> Outline:
     """Validate ``points`` (N, 2 pixels; an :class:`Outline` passes through), orient
     them positively and resample to ``n_points`` evenly spaced points."""
@@ -207,10 +210,12 @@ def make_outline(points, n_points: int = DEFAULT_POINTS, *, name: str = "outline
     arr = validate_points(points, name=name)
     if float(signed_area(jnp.asarray(arr))) < 0:
         arr = arr[::-1]
-    if len(arr) < n_points // 4:
+    spacing = float(np.mean(np.linalg.norm(np.roll(arr, -1, axis=0) - arr, axis=1)))
+    if len(arr) < n_points // 4 and spacing > SPARSE_SPACING_PX:
         warnings.warn(
-            f"{name}: only {len(arr)} points, resampled to {n_points} by straight segments; "
-            "corners of the polygon will bias the fit. Pass a denser outline.",
+            f"{name}: only {len(arr)} points, {spacing:.1f} px apart on average, interpolated to {n_points} by a "
+            "Catmull-Rom curve through them: where the true outline bends between the points the fit is "
+            "biased. Pass a denser outline (e.g. from sorjax.outlines_from_mask, 0.5 px apart).",
             stacklevel=3,
         )
     return Outline(jnp.asarray(resample_closed(arr, n_points)))
