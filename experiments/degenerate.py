@@ -315,7 +315,7 @@ def k_error(cal, K) -> float:
 def property_rates(n: int, n_extra: int, tol: float = 1e-4):
     print(f"\n## Property rates on random exact scenes (tolerance {tol:g} of f, bundle, 3 views)\n")
     names = sorted(scenes.PROFILES)
-    rec, inv, flip, fails = [], [], [], []
+    rec, inv, flip, fails, shape = [], [], [], [], []
     t0 = time.perf_counter()
     for k in range(n):
         rng = np.random.default_rng(5000 + k)
@@ -326,6 +326,7 @@ def property_rates(n: int, n_extra: int, tol: float = 1e-4):
             cal = sorjax.calibrate(sc.outlines)
             ok = cal.success and k_error(cal, K) < tol
             rec.append(ok)
+            shape.append(names[k % len(names)])
             if not ok:
                 fails.append((k, code_name(cal), k_error(cal, K), sc.description))
             if k < n_extra:
@@ -349,6 +350,9 @@ def property_rates(n: int, n_extra: int, tol: float = 1e-4):
     print(f"| noise-free recovery of K within {tol:g} f | {len(rec)} | {np.mean(rec):.1%} |")
     print(f"| invariance to start point and direction | {len(inv)} | {np.mean(inv):.1%} |")
     print(f"| left-right flip gives the flipped K | {len(flip)} | {np.mean(flip):.1%} |")
+    for nm in names:
+        r = [ok for ok, s in zip(rec, shape) if s == nm]
+        print(f"| recovery, {nm} only | {len(r)} | {np.mean(r):.1%} |")
     print(f"\n({dt:.0f} s)")
     for k, code, err, desc in fails:
         print(f"- case {k}: {code}, error {err:.2e} f: {desc}")

@@ -305,6 +305,11 @@ WARN_ASYMMETRY_PX = 1.0
 # principal point: times the outlines' RMS radius when the focal length itself is not
 # determined): a 3-sigma interval reaching zero.
 UNDETERMINED = 1.0 / 3.0
+# A focal length below MIN_FOCAL_FRACTION of the extent of the outlines (their
+# bounding box's larger side, px) would put them across a field of view of about
+# 150 degrees or more: a collapsed estimate (seen on real photographs with weak
+# perspective, where f fell to 1..25 px with a small std), never "determined".
+MIN_FOCAL_FRACTION = 0.25
 # Weak geometry: warn when the relative standard deviation of a focal length exceeds
 # WEAK_REL_STD, the covariance scaled by the residual but at least RESIDUAL_FLOOR_PX
 # (about the accuracy of good sub-pixel outlines), so that a configuration that only
@@ -351,7 +356,8 @@ def _advice(K, vx, ls, outs, free_aspect: bool, aspect_weak: bool, used=None) ->
                 vi, vj = (i, j) if used is None else (used[i], used[j])
                 tips.append(
                     f"views {vi} and {vj} have the same axis and vertex, so they give the same "
-                    "constraints (the same view twice?): move or tilt the object between views"
+                    "constraints (the same view twice, or two centred upright views?): move or tilt "
+                    "the object between views"
                 )
     spread = _axis_spread_deg(ls)
     if np.all(np.isfinite(K)) and K[0, 0] > 0 and K[1, 1] > 0:
@@ -424,7 +430,10 @@ def _assess(K, cov_unit, s_px, outs, vx, ls, free_aspect: bool, used=None, floor
     std_floor = std / max(s_px, 1e-300) * s_floor
     judged = std_floor if floor_verdict else std
     radius = np.sqrt(np.mean([_outline_radius(o) ** 2 for o in outs]))
-    focal_ok = np.isfinite(std[:2]) & (judged[:2] <= UNDETERMINED * np.abs(est[:2]))
+    pts = np.concatenate([np.asarray(getattr(o, "points", o)).reshape(-1, 2) for o in outs])
+    extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+    plausible = np.abs(est[:2]) >= MIN_FOCAL_FRACTION * extent  # else a collapsed estimate
+    focal_ok = np.isfinite(std[:2]) & (judged[:2] <= UNDETERMINED * np.abs(est[:2])) & plausible
     ref = np.sqrt(abs(est[0] * est[1])) if focal_ok.all() else radius
     pp_ok = np.isfinite(std[2:]) & (judged[2:] <= UNDETERMINED * ref)
     determined = np.concatenate([focal_ok, pp_ok])
