@@ -305,3 +305,20 @@ def test_bad_input_says_what_is_wrong_before_any_tracing(outlines, kwargs, words
         sorjax.calibrate(outlines, **kwargs)
     frames = [str(e.path) for e in info.traceback]
     assert not any(("jax" in p and "sorjax" not in p) or "optimistix" in p for p in frames), frames
+
+
+def test_collapsed_focal_length_is_never_determined():
+    # a focal length of 20 px with a small std (seen on weak real photographs) would put
+    # 300-px outlines across ~170 degrees: refused as undetermined, the principal point kept
+    from sorjax._calibration import _assess
+
+    sc = scenes.two_spheres(700.0)
+    K = np.array([[20.0, 0, 320.0], [0, 20.0, 240.0], [0, 0, 1]])
+    vx = np.stack([v.v_x for v in sc.views])
+    ls = np.stack([v.l_s for v in sc.views])
+    outs = [sorjax.make_outline(o) for o in sc.outlines]
+    determined, std, _, _ = _assess(K, np.eye(4) * 1e-4, 0.5, outs, vx, ls, False)
+    assert not determined[:2].any() and determined[2:].all()
+    K[0, 0] = K[1, 1] = 700.0
+    determined, _, _, _ = _assess(K, np.eye(4) * 1e-4, 0.5, outs, vx, ls, False)
+    assert determined.all()
