@@ -880,6 +880,7 @@ def outlines_from_image(
         raise ValueError(f"iterations must be an int between 1 and 50, got {iterations!r}")
     img, imgf = _as_bgr(image)
     H, W = img.shape[:2]
+    cv2.setRNGSeed(0)  # GrabCut's k-means draws from OpenCV's RNG: same image, same outlines
     segs = []  # (index, box, window, foreground)
     if boxes is not None:
         bxs = _check_boxes(boxes, (H, W))

@@ -358,3 +358,10 @@ def test_end_to_end_calibration_from_rendered_masks():
     assert cal.success
     assert abs(cal.fu / K[0, 0] - 1) < 0.01 and abs(cal.fv / K[1, 1] - 1) < 0.01
     assert abs(cal.u0 - K[0, 2]) < 5 and abs(cal.v0 - K[1, 2]) < 5
+
+
+def test_outlines_from_image_are_repeatable():
+    r = R.random_table_scene(1, n_objects=2)
+    a = sorjax.outlines_from_image(r.image)
+    b = sorjax.outlines_from_image(r.image)
+    assert len(a) == len(b) == 2 and all(np.array_equal(x, y) for x, y in zip(a, b))
