@@ -47,7 +47,8 @@ def write_camera(cal, path, image_size: tuple[int, int], sources=()) -> tuple[Pa
     return path, twin
 
 
-def _clip_line(l, w, h):
+def clip_line(l, w, h):
+    """End points of the homogeneous line ``l`` inside the ``w`` x ``h`` image, or None."""
     pts = []
     for x in (0.0, w - 1.0):
         if abs(l[1]) > 1e-12:
@@ -83,7 +84,7 @@ def draw_overlay(image, views, path) -> Path:
         if l is None:
             continue
         l, v = np.asarray(l, dtype=np.float64), np.asarray(v, dtype=np.float64)
-        seg = _clip_line(l, w, h)
+        seg = clip_line(l, w, h)
         if seg:
             cv2.line(img, pix(seg[0]), pix(seg[1]), (255, 0, 255), 1, cv2.LINE_AA, sh)
         W = np.eye(3) - 2.0 * np.outer(v, l) / (v @ l)

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from .._camera_io import clip_line as _clip_line
 from ._config import SWEEPS, Config
 
 NAMES = ("fu", "fv", "u0", "v0")
@@ -164,22 +165,6 @@ def error_figures(cfg: Config, summary: list[dict], bounds: dict | None, out_dir
         plt.close(fig)
         files.append(name)
     return files
-
-
-def _clip_line(l, w, h):
-    """End points of the homogeneous line ``l`` inside the image box, or None."""
-    pts = []
-    for x in (0.0, w - 1.0):
-        if abs(l[1]) > 1e-12:
-            y = -(l[0] * x + l[2]) / l[1]
-            if 0 <= y <= h - 1:
-                pts.append((x, y))
-    for y in (0.0, h - 1.0):
-        if abs(l[0]) > 1e-12:
-            x = -(l[1] * y + l[2]) / l[0]
-            if 0 <= x <= w - 1:
-                pts.append((x, y))
-    return (pts[0], pts[-1]) if len(pts) >= 2 else None
 
 
 def scene_figure(scene, noisy, homologies, out_path, title: str = "") -> None:
