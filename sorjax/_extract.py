@@ -37,6 +37,8 @@ from typing import Sequence
 import cv2
 import numpy as np
 
+from ._outline import resample_closed
+
 __all__ = ["outlines_from_mask", "outlines_from_image"]
 
 _BORDER_MODES = ("refuse", "cut", "raise")
@@ -198,20 +200,9 @@ def _shoelace(p: np.ndarray) -> float:
 
 def _resample(p: np.ndarray, spacing: float) -> np.ndarray:
     """Closed curve through the points ``p`` resampled evenly in arc length, at most
-    ``spacing`` px apart: cubic Hermite (Catmull-Rom) between the input points, in
-    chord length, with central-difference tangents."""
-    m = len(p)
-    h = np.hypot(*(np.roll(p, -1, axis=0) - p).T)
-    s = np.concatenate([[0.0], np.cumsum(h)])
-    n = max(8, int(math.ceil(s[-1] / spacing)))
-    tan = (np.roll(p, -1, axis=0) - np.roll(p, 1, axis=0)) / (h + np.roll(h, 1))[:, None]
-    t = np.arange(n) * (s[-1] / n)
-    i = np.clip(np.searchsorted(s, t, side="right") - 1, 0, m - 1)
-    u = ((t - s[i]) / h[i])[:, None]
-    j = (i + 1) % m
-    hi = h[i][:, None]
-    h00, h10, h01, h11 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u, -2 * u**3 + 3 * u**2, u**3 - u**2
-    return h00 * p[i] + h10 * hi * tan[i] + h01 * p[j] + h11 * hi * tan[j]
+    ``spacing`` px apart (:func:`sorjax._outline.resample_closed`: Catmull-Rom)."""
+    length = float(np.sum(np.hypot(*(np.roll(p, -1, axis=0) - p).T)))
+    return resample_closed(p, max(8, int(math.ceil(length / spacing))))
 
 
 def _periodic_gauss(x: np.ndarray, sigma: float, order: int) -> np.ndarray:
