@@ -25,34 +25,20 @@ from __future__ import annotations
 import argparse
 import math
 import time
-import warnings
 
 import cv2
 import numpy as np
 
 import sorjax
+from _common import recorded
 from sorjax import render as R
 from sorjax import scenes as S
 
 SHAPES = ("vase", "bowl", "bottle", "wine_glass", "candle_holder")
 
 
-def dist_to_polyline(pts: np.ndarray, poly: np.ndarray, chunk: int = 256) -> np.ndarray:
-    """Distance (pixels) of each point to the closed polyline ``poly`` (nearest segment)."""
-    a = poly
-    ab = np.roll(poly, -1, axis=0) - a
-    L2 = np.maximum(np.sum(ab * ab, axis=1), 1e-300)
-    out = np.empty(len(pts))
-    for s in range(0, len(pts), chunk):
-        ap = pts[s : s + chunk, None, :] - a[None]
-        t = np.clip(np.sum(ap * ab[None], -1) / L2[None], 0.0, 1.0)
-        d = ap - t[..., None] * ab[None]
-        out[s : s + chunk] = np.sqrt(np.min(np.sum(d * d, -1), axis=1))
-    return out
-
-
 def rms_to(outline: np.ndarray, exact: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(dist_to_polyline(outline, exact) ** 2)))
+    return float(np.sqrt(np.mean(S.distance_to_polyline(outline, exact) ** 2)))
 
 
 def match(found: list[np.ndarray], exact: list[np.ndarray]) -> list[np.ndarray | None]:
@@ -68,17 +54,6 @@ def match(found: list[np.ndarray], exact: list[np.ndarray]) -> list[np.ndarray |
         k = int(np.argmin(d))
         out.append(found[k] if d[k] < 10.0 else None)
     return out
-
-
-def quiet(fn, *a, **kw):
-    """Call fn with warnings recorded; returns (result or exception, warnings)."""
-    with warnings.catch_warnings(record=True) as ws:
-        warnings.simplefilter("always")
-        try:
-            res = fn(*a, **kw)
-        except ValueError as err:
-            res = err
-    return res, [str(w.message) for w in ws]
 
 
 def grown(box, m, size):
@@ -108,7 +83,7 @@ def part_a(args, rng):
             binm = match(sorjax.outlines_from_mask(r.mask >= 0.5), exact)
             cnts, _ = cv2.findContours((r.mask >= 0.5).astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
             cvo = match([c[:, 0, :].astype(np.float64) for c in cnts], exact)
-            img, _ = quiet(sorjax.outlines_from_image, r.image, [grown(b, 8, r.image_size) for b in r.boxes])
+            img, _ = recorded(sorjax.outlines_from_image, r.image, [grown(b, 8, r.image_size) for b in r.boxes])
             imo = match([] if isinstance(img, Exception) else img, exact)
             for k, found in (("soft", soft), ("binary", binm), ("cv2", cvo), ("image", imo)):
                 for o, e in zip(found, exact):
@@ -167,11 +142,11 @@ def part_b(args, rng):
             exact = r.outlines
             outl["exact"] += exact
             got = {
-                "soft mask": quiet(sorjax.outlines_from_mask, r.mask),
-                "binary mask": quiet(sorjax.outlines_from_mask, r.mask >= 0.5),
-                "image+boxes": quiet(sorjax.outlines_from_image, r.image,
+                "soft mask": recorded(sorjax.outlines_from_mask, r.mask),
+                "binary mask": recorded(sorjax.outlines_from_mask, r.mask >= 0.5),
+                "image+boxes": recorded(sorjax.outlines_from_image, r.image,
                                      [grown(b, 8, r.image_size) for b in r.boxes]),
-                "image auto": quiet(sorjax.outlines_from_image, r.image),
+                "image auto": recorded(sorjax.outlines_from_image, r.image),
             }
             for s, (res, ws) in got.items():
                 if isinstance(res, Exception):
@@ -188,7 +163,7 @@ def part_b(args, rng):
                 rows.append((ci, K, s, None, len(outl[s]), notes[s], orms[s]))
                 errs[s] += [float("nan"), float("nan")]
                 continue
-            cal, ws = quiet(sorjax.calibrate, outl[s], method="bundle")
+            cal, ws = recorded(sorjax.calibrate, outl[s], method="bundle")
             if isinstance(cal, Exception):
                 notes[s].append(f"calibrate: {cal}")
                 rows.append((ci, K, s, None, len(outl[s]), notes[s], orms[s]))

@@ -32,7 +32,6 @@ import json
 import math
 import sys
 import time
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -40,6 +39,7 @@ import cv2
 import numpy as np
 
 import sorjax
+from _common import recorded
 
 DEFAULT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "realdata"
 SETS = (
@@ -71,17 +71,6 @@ class View:
     def label(self) -> str:
         stem = Path(self.image).stem.replace("-color", "").replace("_color", "")
         return f"{stem}:{self.name.split(' (')[0]}"
-
-
-def _recorded(fn, *a, **kw):
-    """Call fn with warnings recorded: (result or ValueError, [warning texts])."""
-    with warnings.catch_warnings(record=True) as ws:
-        warnings.simplefilter("always")
-        try:
-            res = fn(*a, **kw)
-        except ValueError as err:
-            res = err
-    return res, [str(w.message) for w in ws]
 
 
 def _grow(box, margin, w, h):
@@ -134,11 +123,11 @@ def collect_views(root: Path, set_name: str, box_margin: int) -> tuple[list[View
             if not sel.any():
                 v.error = f"mask_id {o['mask_id']} absent from the mask"
                 continue
-            res, ws = _recorded(sorjax.outlines_from_mask, sel, border="refuse")
+            res, ws = recorded(sorjax.outlines_from_mask, sel, border="refuse")
             if isinstance(res, ValueError) and "border" in str(res):
                 # the object reaches the image border: keep it with the frame as part
                 # of its outline for the axis check (a), but not for the calibration (b)
-                res, ws2 = _recorded(sorjax.outlines_from_mask, sel, border="cut")
+                res, ws2 = recorded(sorjax.outlines_from_mask, sel, border="cut")
                 v.cut = True
                 v.notes.append("cut by the image border (axis check only, not calibrated)")
             if isinstance(res, ValueError):
@@ -149,7 +138,7 @@ def collect_views(root: Path, set_name: str, box_margin: int) -> tuple[list[View
                     v.notes.append(f"{len(res)} regions in the mask, largest used")
         for v, box in box_objs:
             # one call per box: a failure of one object does not hide the others
-            res, ws = _recorded(sorjax.outlines_from_image, image, [box], border="refuse")
+            res, ws = recorded(sorjax.outlines_from_image, image, [box], border="refuse")
             v.notes += ws
             if isinstance(res, ValueError):
                 v.error = f"outline: {res}"
@@ -181,7 +170,7 @@ def fit_views(views: list[View]) -> None:
     for v in views:
         if v.outline is None:
             continue
-        res, ws = _recorded(sorjax.fit_homology, v.outline)
+        res, ws = recorded(sorjax.fit_homology, v.outline)
         v.notes += ws
         if isinstance(res, ValueError):
             v.error = f"fit: {res}"
@@ -231,7 +220,7 @@ def calibrate_set(views: list[View], K_true: np.ndarray, set_name: str) -> list[
     truth = np.array([K_true[0, 0], K_true[1, 1], K_true[0, 2], K_true[1, 2]])
     for ar, ar_name in ((1.0, "aspect 1"), (None, "aspect free")):
         t0 = time.perf_counter()
-        res, ws = _recorded(
+        res, ws = recorded(
             sorjax.calibrate,
             [v.outline for v in usable],
             method="bundle",

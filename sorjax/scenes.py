@@ -88,6 +88,7 @@ from typing import Callable, Sequence, Union
 import numpy as np
 
 __all__ = [
+    "distance_to_polyline",
     "ViewTruth",
     "Scene",
     "Silhouette",
@@ -1562,6 +1563,23 @@ def _check_sigma(sigma) -> float:
     if not (np.isfinite(sigma) and sigma >= 0):
         raise ValueError(f"sigma must be a finite number >= 0 (pixels), got {sigma}")
     return sigma
+
+
+def distance_to_polyline(points, polyline, chunk: int = 256) -> np.ndarray:
+    """Unsigned distance (pixels) from each of ``points`` (K, 2) to the closed polyline
+    ``polyline`` (M, 2): the nearest of its M segments, searched exhaustively (O(K M),
+    in chunks of ``chunk`` points).  For checking outlines against an exact one."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    a = np.asarray(polyline, dtype=np.float64).reshape(-1, 2)
+    ab = np.roll(a, -1, axis=0) - a
+    L2 = np.maximum(np.sum(ab * ab, axis=1), 1e-300)
+    out = np.empty(len(pts))
+    for s in range(0, len(pts), chunk):
+        ap = pts[s : s + chunk, None, :] - a[None]
+        t = np.clip(np.sum(ap * ab[None], -1) / L2[None], 0.0, 1.0)
+        d = ap - t[..., None] * ab[None]
+        out[s : s + chunk] = np.sqrt(np.min(np.sum(d * d, -1), axis=1))
+    return out
 
 
 def outline_normals(outline) -> np.ndarray:

@@ -14,22 +14,8 @@ from sorjax import scenes as S
 # ------------------------------------------------------------------ helpers
 
 
-def dist_to_polyline(pts, poly, chunk=256):
-    """Distance of each point to the closed polyline ``poly`` (nearest segment), px."""
-    a = poly
-    ab = np.roll(poly, -1, axis=0) - a
-    L2 = np.maximum(np.sum(ab * ab, axis=1), 1e-300)
-    out = np.empty(len(pts))
-    for s in range(0, len(pts), chunk):
-        ap = pts[s : s + chunk, None, :] - a[None]
-        t = np.clip(np.sum(ap * ab[None], -1) / L2[None], 0.0, 1.0)
-        d = ap - t[..., None] * ab[None]
-        out[s : s + chunk] = np.sqrt(np.min(np.sum(d * d, -1), axis=1))
-    return out
-
-
 def rms_to(outline, exact):
-    return float(np.sqrt(np.mean(dist_to_polyline(outline, exact) ** 2)))
+    return float(np.sqrt(np.mean(S.distance_to_polyline(outline, exact) ** 2)))
 
 
 def match(found, exact):
@@ -324,7 +310,7 @@ def test_render_ground_truth_and_determinism(scene):
         assert np.allclose(sil.points, o)
         # the image of the axis is a symmetry axis: W maps the outline onto itself
         h = np.column_stack([o, np.ones(len(o))]) @ obj.truth.W.T
-        assert dist_to_polyline(h[:, :2] / h[:, 2:], o).max() < 0.05
+        assert S.distance_to_polyline(h[:, :2] / h[:, 2:], o).max() < 0.05
 
 
 def test_render_occlusion_and_inputs():

@@ -23,17 +23,6 @@ def _apply(H, pts):
     return h[:, :2] / h[:, 2:3]
 
 
-def _dist_to_polyline(pts, poly):
-    """Distance of each point to the closed polyline ``poly``."""
-    a = poly
-    b = np.roll(poly, -1, axis=0)
-    ab = b - a
-    ap = pts[:, None, :] - a[None]
-    t = np.clip(np.sum(ap * ab[None], -1) / np.sum(ab * ab, -1)[None], 0.0, 1.0)
-    d = ap - t[..., None] * ab[None]
-    return np.sqrt(np.min(np.sum(d * d, -1), axis=1))
-
-
 def _view_conics(P):
     return [S.sphere_image_conic(P, c, r) for c, r in S.TWO_SPHERES]
 
@@ -142,7 +131,7 @@ def test_homology_maps_two_sphere_outline_onto_itself(spheres700):
         d = np.array([S._conic_distance(C, y) for C in conics])
         assert np.min(np.abs(d), axis=0).max() < 1e-7  # exact curve
         assert np.max(d, axis=0).min() > -1e-7
-        assert _dist_to_polyline(y, v.outline).max() < 1e-3  # dense polyline
+        assert S.distance_to_polyline(y, v.outline).max() < 1e-3  # dense polyline
 
 
 def test_two_spheres_focal_scaling_keeps_the_outline_size(spheres700, spheres1400):
@@ -215,7 +204,7 @@ def test_sor_silhouette_is_exact(name, elevation):
     vt = S.view_truth(K800, R, t, sil.points)
     y = _apply(vt.W, sil.points[::9])
     assert np.abs(S.silhouette_margin(prof, K800, R, t, y)).max() < 1e-10 * prof.scale
-    assert _dist_to_polyline(y, sil.points).max() < 2e-3
+    assert S.distance_to_polyline(y, sil.points).max() < 2e-3
     gaps = np.hypot(*(np.roll(sil.points, -1, 0) - sil.points).T)
     assert gaps.max() <= 0.3 * 1.01
     assert S._self_intersections(sil.points) == 0
@@ -320,7 +309,7 @@ def test_random_scenes_are_valid(random_scenes):
             # W maps the outline onto itself (to the chord error of the dense polyline,
             # which reaches a few 1e-3 px where the outline is sharply curved)
             y = _apply(v.W, o[::11])
-            assert _dist_to_polyline(y, o).max() < 2e-2
+            assert S.distance_to_polyline(y, o).max() < 2e-2
 
 
 def test_random_scene_is_deterministic():
