@@ -15,11 +15,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from ._camera import intrinsics_matrix, normalising_transform, omega_vector_from_intrinsics, omega_matrix
+from ._camera import normalising_transform, transform_points
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
-from ._bundle import BundleProblem, chart, covariance, fit_bundle, pack_intrinsics, unpack_intrinsics, vertices
+from ._bundle import BundleProblem, axis_params, covariance, fit_bundle, intrinsic_params, solution_in_pixels
 from ._bundle import _setup as _bundle_setup
-from ._linear import method_i, method_ii
+from ._linear import linear_in_pixels
 from ._outline import DEFAULT_POINTS, as_outlines
 
 METHODS = ("bundle", "I", "IIa", "IIb")
@@ -169,22 +169,13 @@ def _check_method(method: str, aspect_ratio):
 
 
 def _linear_once(homologies, method: str, T: np.ndarray, a: float, weights=None):
-    A = np.diag([1.0 / a, 1.0, 1.0])
-    v = np.stack([np.asarray(h.v_x) for h in homologies]) @ (T @ A).T
-    l = np.stack([np.asarray(h.l_s) for h in homologies]) @ np.linalg.inv(T @ A)
-    v, l = jnp.asarray(v), jnp.asarray(l)
-    if method == "I":
-        fu, fv, u0, v0, ok = method_i(v, l)
-        code = RESULTS.where(ok, RESULTS.successful, RESULTS.degenerate)
-    else:
-        fu, fv, u0, v0, ok, _ = method_ii(v, l, unit_aspect=(method == "IIb"), weights=weights)
-        code = RESULTS.where(ok, RESULTS.successful, RESULTS.not_positive_definite)
-    Kn = intrinsics_matrix(fu, fv, u0, v0)
-    K = jnp.asarray(np.linalg.inv(A) @ np.linalg.inv(T)) @ Kn
-    omega_n = omega_matrix(omega_vector_from_intrinsics(fu, fv, u0, v0))
-    TA = jnp.asarray(T @ A)
-    omega = TA.T @ omega_n @ TA
-    return K, omega, code
+    TA = T @ np.diag([1.0 / a, 1.0, 1.0])
+    v = np.stack([np.asarray(h.v_x) for h in homologies])
+    l = np.stack([np.asarray(h.l_s) for h in homologies])
+    K, omega, ok = linear_in_pixels(v, l, TA, weights, method=method)
+    if bool(ok):
+        return K, omega, RESULTS.successful
+    return K, omega, RESULTS.degenerate if method == "I" else RESULTS.not_positive_definite
 
 
 def conditioning_from_K(K, a: float = 1.0) -> np.ndarray:
@@ -245,43 +236,40 @@ def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples):
                 seeds.append((fu, fv, Kn[0, 2], Kn[1, 2]))
     if not seeds:
         seeds = [(a * f, f, 0.0, 0.0) for f in (2.0, 5.0, 12.0)]
-    pts_n = np.stack([np.asarray(o.points) @ T[:2, :2].T + T[:2, 2] for o in outs])
-    v_n = np.stack([T @ np.asarray(h.v_x) for h in homologies])
-    y, res, steps, r, problem = fit_bundle(pts_n, v_n, seeds, aspect_ratio, n_samples)
+    pts_n = _normalised_points(outs, T)
+    l_n = _axes_normalised(homologies, T)
+    y, res, steps, r, problem = fit_bundle(pts_n, l_n, seeds, aspect_ratio, n_samples)
     cov, s2 = covariance(y, problem, jnp.asarray(T))
-    fu, fv, u0, v0 = unpack_intrinsics(y[0], problem.aspect)
-    Kn = intrinsics_matrix(fu, fv, u0, v0)
-    K = jnp.asarray(np.linalg.inv(T)) @ Kn
-    omega = jnp.linalg.inv(K).T @ jnp.linalg.inv(K)
-    ok = (res == optx.RESULTS.successful) & jnp.all(jnp.isfinite(K))
-    code = RESULTS.where(ok, RESULTS.successful, RESULTS.not_converged)
-    rv = r.reshape(len(outs), -1) * scale
-    view_rms = jnp.sqrt(jnp.mean(rv**2, axis=1))
-    cost = jnp.sum(rv**2)
-    vx = vertices(y[1], problem.v0, problem.E) @ jnp.asarray(np.linalg.inv(T)).T
-    vx = vx / jnp.linalg.norm(vx, axis=1, keepdims=True)
-    ls = vx @ omega
-    ls = ls / jnp.linalg.norm(ls[:, :2], axis=1, keepdims=True)
+    K, omega, vx, ls = solution_in_pixels(y, problem, jnp.asarray(T))
+    ok = bool(res == optx.RESULTS.successful) and bool(np.all(np.isfinite(np.asarray(K))))
+    code = RESULTS.successful if ok else RESULTS.not_converged
+    rv = np.asarray(r).reshape(len(outs), -1) * scale
+    view_rms = jnp.asarray(np.sqrt(np.mean(rv**2, axis=1)))
+    cost = jnp.asarray(np.sum(rv**2))
     return K, omega, code, cov, cost, view_rms, steps, vx, ls, float(np.sqrt(s2)) * scale
 
 
 def _linearised_covariance(outs, homologies, K, T, aspect_ratio, n_samples):
     """Covariance of ``(fu, fv, u0, v0)`` per px^2 of symmetry residual, for a linear
     method's estimate ``K``: the bundle's linearisation (:func:`sorjax._bundle.covariance`)
-    at ``K`` with the per-view fits' vertices.  It measures how well these views
+    at ``K`` with the per-view fits' axes.  It measures how well these views
     determine the intrinsics whatever the estimator (infinite where they don't)."""
     scale = 1.0 / T[0, 0]
-    pts_n = jnp.asarray(np.stack([np.asarray(o.points) @ T[:2, :2].T + T[:2, 2] for o in outs]))
-    fields, samples, weights = _bundle_setup(pts_n, n_samples)
-    v0, E = chart(np.stack([T @ np.asarray(h.v_x) for h in homologies]))
-    problem = BundleProblem(
-        fields, samples, weights, jnp.asarray(v0), jnp.asarray(E),
-        jnp.asarray(np.nan if aspect_ratio is None else float(aspect_ratio)),
-    )
-    Kn = T @ np.asarray(K)
-    k = pack_intrinsics(*(jnp.asarray(x) for x in (Kn[0, 0], Kn[1, 1], Kn[0, 2], Kn[1, 2])), aspect_ratio is None)
-    cov, s2 = covariance((k, jnp.zeros((len(outs), 2))), problem, jnp.asarray(T))
+    fields, samples, weights = _bundle_setup(jnp.asarray(_normalised_points(outs, T)), n_samples)
+    problem = BundleProblem(fields, samples, weights, jnp.asarray(np.nan if aspect_ratio is None else float(aspect_ratio)))
+    y = (intrinsic_params(T @ np.asarray(K), aspect_ratio is None), axis_params(_axes_normalised(homologies, T)))
+    cov, s2 = covariance(y, problem, jnp.asarray(T))
     return np.asarray(cov) / (max(float(s2), 1e-300) * scale**2)
+
+
+def _normalised_points(outs, T) -> np.ndarray:
+    """(V, M, 2) outline points in the coordinates of the similarity ``T``."""
+    return transform_points(T, np.stack([np.asarray(o.points) for o in outs]))
+
+
+def _axes_normalised(homologies, T) -> np.ndarray:
+    """(V, 3) per-view axes ``l_s`` in the coordinates of ``T`` (lines map by ``T^-T``)."""
+    return np.stack([np.linalg.solve(T.T, np.asarray(h.l_s)) for h in homologies])
 
 
 # ------------------------------------------------------------ degenerate geometry

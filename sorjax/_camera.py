@@ -108,8 +108,10 @@ def pixel_intrinsics(T, fu, fv, u0, v0) -> Float[Array, "4"]:
 
 
 def transform_points(T, x: Float[Array, "... 2"]) -> Float[Array, "... 2"]:
-    """Apply a similarity/affine ``T`` (3x3 with last row (0,0,1)) to inhomogeneous points."""
-    T = jnp.asarray(T)
+    """Apply a similarity/affine ``T`` (3x3 with last row (0,0,1)) to inhomogeneous
+    points; numpy in (both numpy), numpy out."""
+    if not (isinstance(x, np.ndarray) and isinstance(T, np.ndarray)):
+        T = jnp.asarray(T)
     return x @ T[:2, :2].T + T[:2, 2]
 
 

@@ -86,6 +86,15 @@ def curve(field: DistanceField, t):
     return b @ p, db @ p, ddb @ p
 
 
+def _argmin(d: Float[Array, " n"]) -> Float[Array, ""]:
+    """``jnp.argmin`` (first index of the minimum) from two plain reductions: XLA's
+    variadic argmin reduction is several times slower on CPU, and this search runs
+    for every residual of every solver step."""
+    n = d.shape[-1]
+    first = jnp.min(jnp.where(d <= jnp.min(d), jnp.arange(n), n))
+    return jnp.minimum(first, n - 1)  # all-NaN input: the last index, not out of range
+
+
 def _nearest_knot(field: DistanceField, x: Float[Array, "2"]) -> Float[Array, ""]:
     """Index of the knot nearest to ``x``: a coarse pass over every ``s``-th knot
     (``s ~ sqrt(M / 2)``), then an exact pass over the ``2 s + 1`` knots around each
@@ -94,15 +103,15 @@ def _nearest_knot(field: DistanceField, x: Float[Array, "2"]) -> Float[Array, ""
     m = field.n_knots
     s = max(1, int(round((m / 2) ** 0.5)))
     if m <= 128:
-        return jnp.argmin(jnp.sum((field.knots - x) ** 2, axis=-1))
+        return _argmin(jnp.sum((field.knots - x) ** 2, axis=-1))
     coarse = field.knots[::s]
     dc = jnp.sum((coarse - x) ** 2, axis=-1)
-    b1 = jnp.argmin(dc)  # two argmins: several times faster than lax.top_k on CPU
-    b2 = jnp.argmin(dc.at[b1].set(jnp.inf))
+    b1 = _argmin(dc)
+    b2 = _argmin(jnp.where(jnp.arange(dc.shape[0]) == b1, jnp.inf, dc))
     best = jnp.stack([b1, b2])
     idx = (best[:, None] * s + jnp.arange(-s, s + 1)[None, :]).reshape(-1) % m
     d2 = jnp.sum((field.knots[idx] - x) ** 2, axis=-1)
-    return idx[jnp.argmin(d2)]
+    return idx[_argmin(d2)]
 
 
 def closest_parameter(field: DistanceField, x: Float[Array, "2"]) -> Float[Array, ""]:

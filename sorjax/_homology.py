@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import functools
 
+import cv2
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -51,7 +52,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from ._camera import normalising_transform, transform_points
 from ._field import DistanceField, curve_points, make_field, sample_weights, signed_distances
-from ._outline import DEFAULT_POINTS, Outline, make_outline
+from ._outline import DEFAULT_POINTS, Outline, make_outline, perimeter
 
 DEFAULT_SAMPLES = 100
 INFINITY_Z = 3.0
@@ -174,22 +175,8 @@ def _pack(v: np.ndarray, l: np.ndarray):
 
 def _convex_hull_indices(p: np.ndarray) -> np.ndarray:
     """Indices of the convex hull vertices of ``p`` (n, 2), sorted by index."""
-    order = np.lexsort((p[:, 1], p[:, 0]))
-
-    def half(idx):
-        h: list[int] = []
-        for i in idx:
-            while len(h) >= 2:
-                o, a = p[h[-2]], p[h[-1]]
-                if (a[0] - o[0]) * (p[i][1] - o[1]) - (a[1] - o[1]) * (p[i][0] - o[0]) <= 0:
-                    h.pop()
-                else:
-                    break
-            h.append(int(i))
-        return h
-
-    hull = half(order)[:-1] + half(order[::-1])[:-1]
-    return np.unique(np.asarray(hull, dtype=int))
+    hull = cv2.convexHull(np.ascontiguousarray(p, dtype=np.float32), returnPoints=False)
+    return np.unique(hull.reshape(-1).astype(int))
 
 
 def _pockets(p: np.ndarray, min_depth: float):
@@ -255,8 +242,9 @@ def _mirror_costs(knots, samples, thetas, offsets):
         l = jnp.stack([jnp.cos(theta), jnp.sin(theta), -rho])
         v = jnp.stack([jnp.cos(theta), jnp.sin(theta), 0.0])
         y = transfer(homology_matrix(v, l), samples)
-        d2 = jnp.min(jnp.sum((y[:, None, :] - knots[None, :, :]) ** 2, -1), -1)
-        return jnp.mean(jnp.minimum(d2, 0.25))  # truncated: robust to gross mismatch
+        # |y - k|^2 = |y|^2 + |k|^2 - 2 y.k, the cross term as one matrix product
+        d2 = jnp.sum(y**2, -1)[:, None] + jnp.sum(knots**2, -1)[None, :] - 2.0 * y @ knots.T
+        return jnp.mean(jnp.minimum(jnp.min(d2, -1), 0.25))  # truncated: robust to gross mismatch
 
     return jax.vmap(lambda t: jax.vmap(lambda r: cost(t, r))(offsets))(thetas)
 
@@ -379,15 +367,10 @@ def fit_conic(points_n: np.ndarray):
     return np.array([[a, b / 2, d / 2], [b / 2, c, e / 2], [d / 2, e / 2, f]]), rms
 
 
-def conic_rms(points_n: np.ndarray) -> float:
-    """RMS Sampson distance of points from their least-squares conic (:func:`fit_conic`)."""
-    return fit_conic(points_n)[1]
-
-
 NEAR_CONIC = 0.05  # normalised units (the outline's RMS radius is sqrt 2)
 
 
-def conic_candidates(points_n: np.ndarray, n_dir: int = 12):
+def conic_candidates(points_n: np.ndarray, n_dir: int = 12, conic=None):
     """For a nearly conic outline (a bowl seen from above): every line ``l`` through
     the conic's centre with its pole ``v = C^-1 l`` is an exact homology of the conic;
     the outline's departure from the conic picks the right one, so these are starts."""
@@ -459,14 +442,15 @@ def fit_homology(
     pts = np.asarray(o.points)
     T = normalising_transform(pts)
     scale = 1.0 / T[0, 0]
-    pn = np.asarray(transform_points(T, pts))
-    smooth = float(smooth_px) / (float(np.asarray(o.perimeter())) / o.n_points) if smooth_px else 0.0
+    pn = transform_points(T, pts)
+    smooth = float(smooth_px) / (perimeter(pts) / o.n_points) if smooth_px else 0.0
     field, samples, weights = _view_setup(jnp.asarray(pn), n_samples, smooth)
+    conic = fit_conic(pn)
     if init is not None:
         v0, l0 = (np.asarray(a, dtype=np.float64) for a in init)
         cands = [(T @ v0, np.linalg.solve(T.T, l0))]
     else:
-        cands = bitangent_candidates(pn) + mirror_candidates(pn, samples) + conic_candidates(pn)
+        cands = bitangent_candidates(pn) + mirror_candidates(pn, samples) + conic_candidates(pn, conic=conic)
     v, l, cost, ok, steps = _refine_candidates(field, samples, weights, cands, max_steps=max_steps)
     z = _infinity_z(field, samples, weights, jnp.asarray(v), jnp.asarray(l), jnp.asarray(cost))
-    return _to_pixels(T, v, l, cost, ok, steps, scale, float(jnp.sum(weights)), conic_rms(pn), z)
+    return _to_pixels(T, v, l, cost, ok, steps, scale, float(jnp.sum(weights)), conic[1], z)

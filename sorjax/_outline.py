@@ -35,17 +35,28 @@ class Outline(eqx.Module):
         return self.points.shape[-2]
 
     def perimeter(self) -> Float[Array, ""]:
-        d = jnp.roll(self.points, -1, axis=-2) - self.points
-        return jnp.sum(jnp.linalg.norm(d, axis=-1), axis=-1)
+        return perimeter(self.points)
 
     def area(self) -> Float[Array, ""]:
         return signed_area(self.points)
 
 
+def _xp(p):
+    """numpy for numpy input (no JAX dispatch at the boundary), else jax.numpy."""
+    return np if isinstance(p, np.ndarray) else jnp
+
+
 def signed_area(p) -> Float[Array, ""]:
     """Shoelace area of a closed polygon (..., M, 2); positive for our orientation."""
-    q = jnp.roll(p, -1, axis=-2)
-    return 0.5 * jnp.sum(p[..., 0] * q[..., 1] - q[..., 0] * p[..., 1], axis=-1)
+    xp = _xp(p)
+    q = xp.roll(p, -1, axis=-2)
+    return 0.5 * xp.sum(p[..., 0] * q[..., 1] - q[..., 0] * p[..., 1], axis=-1)
+
+
+def perimeter(p) -> Float[Array, ""]:
+    """Length of a closed polygon (..., M, 2), closing edge included."""
+    xp = _xp(p)
+    return xp.sum(xp.linalg.norm(xp.roll(p, -1, axis=-2) - p, axis=-1), axis=-1)
 
 
 def _segments_cross(p: np.ndarray) -> bool:
@@ -166,7 +177,7 @@ def validate_points(points, *, name: str = "outline") -> np.ndarray:
             "boundary of one silhouette); check the point order, or split touching objects."
         )
     perim = float(seg.sum() + gap)
-    area = float(signed_area(jnp.asarray(arr)))
+    area = float(signed_area(arr))
     if abs(area) < 1e-4 * perim**2:
         raise ValueError(
             f"{name}: encloses (almost) no area ({abs(area):.3g} px^2 for a perimeter of "
@@ -208,7 +219,7 @@ def make_outline(points, n_points: int = DEFAULT_POINTS, *, name: str = "outline
     if isinstance(points, Outline) and points.n_points == n_points:
         return points
     arr = validate_points(points, name=name)
-    if float(signed_area(jnp.asarray(arr))) < 0:
+    if float(signed_area(arr)) < 0:
         arr = arr[::-1]
     spacing = float(np.mean(np.linalg.norm(np.roll(arr, -1, axis=0) - arr, axis=1)))
     if len(arr) < n_points // 4 and spacing > SPARSE_SPACING_PX:

@@ -32,8 +32,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._bundle import BundleProblem, chart, pack_intrinsics, residuals, unpack_intrinsics
-from ._camera import normalising_transform, pixel_intrinsics
+from ._bundle import BundleProblem, axis_params, intrinsic_params, residuals, unpack_intrinsics
+from ._camera import normalising_transform, pixel_intrinsics, transform_points
 from ._field import curve, curve_points, make_field, sample_weights
 from ._outline import DEFAULT_POINTS, make_outline
 
@@ -64,7 +64,7 @@ def _noise_covariance(arc: np.ndarray, perimeter: float, sigma: float, model: st
 
 
 @functools.partial(jax.jit, static_argnames=("n_samples",))
-def _jacobians(y0, pn, normals, weights, v0, E, aspect, n_samples: int):
+def _jacobians(y0, pn, normals, weights, aspect, n_samples: int):
     """Jacobians of the stacked residuals at ``y0`` in the parameters (``J``) and in
     the normal displacements of the outline points (``B``), one compiled program."""
     flat0, unravel = jax.flatten_util.ravel_pytree(y0)
@@ -73,7 +73,7 @@ def _jacobians(y0, pn, normals, weights, v0, E, aspect, n_samples: int):
         p = pn + n[..., None] * normals
         fields = jax.vmap(make_field)(p)
         samples = jax.vmap(lambda f: curve_points(f, n_samples))(fields)
-        prob = BundleProblem(fields, samples, weights, v0, E, aspect)
+        prob = BundleProblem(fields, samples, weights, aspect)
         return residuals(unravel(flat), prob)
 
     n0 = jnp.zeros(pn.shape[:2])
@@ -120,7 +120,7 @@ def predicted_error(
     V, M = pts.shape[:2]
     T = normalising_transform(pts.reshape(-1, 2))
     s = 1.0 / T[0, 0]
-    pn = pts @ T[:2, :2].T + T[:2, 2]
+    pn = transform_points(T, pts)
     tangents, weights = _geometry(jnp.asarray(pn), n_samples)
     tangents = np.asarray(tangents)
     normals = np.stack([tangents[..., 1], -tangents[..., 0]], -1)
@@ -129,14 +129,11 @@ def predicted_error(
     K = np.asarray(scene.K)
     Kn = T @ K
     free = aspect_ratio is None
-    k0 = pack_intrinsics(*(jnp.asarray(x) for x in (Kn[0, 0], Kn[1, 1], Kn[0, 2], Kn[1, 2])), free)
-    v_n = np.stack([T @ np.asarray(v.v_x) for v in scene.views])
-    v0, E = chart(v_n)
-    y0 = (k0, jnp.zeros((V, 2)))
+    k0 = intrinsic_params(Kn, free)
+    y0 = (k0, axis_params(np.stack([np.linalg.solve(T.T, np.asarray(v.l_s)) for v in scene.views])))
     aspect = jnp.asarray(np.nan if free else float(aspect_ratio))
 
-    J, B = _jacobians(y0, jnp.asarray(pn), jnp.asarray(normals), weights, jnp.asarray(v0), jnp.asarray(E), aspect,
-                      n_samples)
+    J, B = _jacobians(y0, jnp.asarray(pn), jnp.asarray(normals), weights, aspect, n_samples)
     J, B = np.asarray(J), np.asarray(B).reshape(J.shape[0], V * M)
     keep = np.asarray(weights).reshape(-1) > 0
     J, B = J[keep], B[keep]

@@ -36,7 +36,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from ._bundle import BundleProblem, chart, pack_intrinsics, residuals, unpack_intrinsics
+from ._bundle import BundleProblem, axis_params, intrinsic_params, residuals, unpack_intrinsics
 from ._camera import normalising_transform, omega_matrix, omega_vector_from_intrinsics, pixel_intrinsics
 from ._field import DistanceField, curve_points, sample_weights, signed_distance, signed_distances
 from ._field import make_field as _make_field
@@ -99,18 +99,15 @@ def calibrated_intrinsics(points: Float[Array, "V M 2"], calibration, n_samples:
     T = normalising_transform(pts.reshape(-1, 2))
     Tj = jnp.asarray(T)
     pn = points @ Tj[:2, :2].T + Tj[:2, 2]
-    v0, E = chart(np.asarray(calibration.v_x) @ T.T)
     fields = jax.vmap(_make_field)(pn)
     samples = jax.vmap(lambda f: curve_points(f, n_samples))(fields)
     weights = jax.vmap(lambda f: sample_weights(f, n_samples))(fields)
     a = calibration.aspect_ratio
-    problem = BundleProblem(
-        fields, samples, weights, jnp.asarray(v0), jnp.asarray(E), jnp.asarray(np.nan if a is None else a)
-    )
-    Kn = T @ np.asarray(calibration.K)
-    k0 = pack_intrinsics(*(jnp.asarray(x) for x in (Kn[0, 0], Kn[1, 1], Kn[0, 2], Kn[1, 2])), a is None)
+    problem = BundleProblem(fields, samples, weights, jnp.asarray(np.nan if a is None else a))
+    k0 = intrinsic_params(T @ np.asarray(calibration.K), a is None)
+    a0 = axis_params(np.asarray(calibration.l_s) @ np.linalg.inv(T))  # lines map by T^-T
     sol = optx.least_squares(
-        residuals, _TIGHT, (k0, jnp.zeros((len(v0), 2))), args=problem, max_steps=200, throw=False,
+        residuals, _TIGHT, (k0, a0), args=problem, max_steps=200, throw=False,
         adjoint=optx.ImplicitAdjoint(),
     )
     return pixel_intrinsics(T, *unpack_intrinsics(sol.value[0], problem.aspect))

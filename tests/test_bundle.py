@@ -11,7 +11,7 @@ import pytest
 
 import sorjax
 from sorjax import losses, scenes
-from sorjax._bundle import BundleProblem, chart, pack_intrinsics, residuals, solve
+from sorjax._bundle import BundleProblem, axis_params, intrinsic_params, residuals, solve
 
 
 @pytest.fixture(scope="module")
@@ -20,16 +20,13 @@ def scene():
 
 
 def problem_at_truth(sc, outlines, n_points=256, n_samples=50):
-    """A bundle problem in pixels (no normalisation) with the chart at the true v_x."""
+    """A bundle problem in pixels (no normalisation), parameters at the truth."""
     pts = jnp.stack([sorjax.make_outline(o, n_points).points for o in outlines])
     fields = jax.vmap(losses.distance_field)(pts)
     samples = jax.vmap(lambda f: losses.outline_samples(f, n_samples))(fields)
     weights = jax.vmap(lambda f: losses.sample_weights(f, n_samples))(fields)
-    v0, E = chart(np.stack([v.v_x for v in sc.views]))
-    prob = BundleProblem(fields, samples, weights, jnp.asarray(v0), jnp.asarray(E), jnp.asarray(jnp.nan))
-    K = sc.K
-    k0 = pack_intrinsics(*(jnp.asarray(x) for x in (K[0, 0], K[1, 1], K[0, 2], K[1, 2])), True)
-    return prob, (k0, jnp.zeros((len(outlines), 2)))
+    prob = BundleProblem(fields, samples, weights, jnp.asarray(jnp.nan))
+    return prob, (intrinsic_params(sc.K, True), axis_params(np.stack([v.l_s for v in sc.views])))
 
 
 def test_bundle_residuals_vanish_at_truth_and_match_public_loss(scene):
