@@ -95,23 +95,36 @@ def _argmin(d: Float[Array, " n"]) -> Float[Array, ""]:
     return jnp.minimum(first, n - 1)  # all-NaN input: the last index, not out of range
 
 
+SEARCH_KNOTS = 512  # the coarse-to-fine search runs on at most this many knots
+
+
 def _nearest_knot(field: DistanceField, x: Float[Array, "2"]) -> Float[Array, ""]:
-    """Index of the knot nearest to ``x``: a coarse pass over every ``s``-th knot
-    (``s ~ sqrt(M / 2)``), then an exact pass over the ``2 s + 1`` knots around each
-    of the two best coarse knots (two, so that thin parts of a shape, a stem or a
-    neck, do not send the search to the wrong side)."""
+    """Index of the knot nearest to ``x``, in three passes: over every ``q``-th knot
+    (``q = M / 512`` for ``M > 512`` knots, else 1) a coarse pass over every ``s``-th
+    of those (``s ~ sqrt(M / 2q)``), then an exact pass over the ``2 s + 1`` around
+    each of the two best coarse ones (two, so that thin parts of a shape, a stem or a
+    neck, do not send the search to the wrong side), then an exact pass over the
+    ``2 q + 1`` knots around the winner.  About 110 distances for 2048 knots instead
+    of 2048; it returns the exact nearest knot except where two far-apart stretches
+    of the outline are equally near (measured: 4 of 20000 points scattered 4 px
+    around a two-sphere outline got a knot at most 0.1 px farther; the Newton steps
+    of :func:`closest_parameter` start from it)."""
     m = field.n_knots
-    s = max(1, int(round((m / 2) ** 0.5)))
     if m <= 128:
         return _argmin(jnp.sum((field.knots - x) ** 2, axis=-1))
-    coarse = field.knots[::s]
-    dc = jnp.sum((coarse - x) ** 2, axis=-1)
+    q = max(1, m // SEARCH_KNOTS)
+    knots = field.knots[::q]
+    md = knots.shape[0]
+    s = max(1, int(round((md / 2) ** 0.5)))
+    dc = jnp.sum((knots[::s] - x) ** 2, axis=-1)
     b1 = _argmin(dc)
     b2 = _argmin(jnp.where(jnp.arange(dc.shape[0]) == b1, jnp.inf, dc))
-    best = jnp.stack([b1, b2])
-    idx = (best[:, None] * s + jnp.arange(-s, s + 1)[None, :]).reshape(-1) % m
-    d2 = jnp.sum((field.knots[idx] - x) ** 2, axis=-1)
-    return idx[_argmin(d2)]
+    idx = (jnp.stack([b1, b2])[:, None] * s + jnp.arange(-s, s + 1)[None, :]).reshape(-1) % md
+    j = idx[_argmin(jnp.sum((knots[idx] - x) ** 2, axis=-1))] * q
+    if q == 1:
+        return j
+    idx = (j + jnp.arange(-q, q + 1)) % m
+    return idx[_argmin(jnp.sum((field.knots[idx] - x) ** 2, axis=-1))]
 
 
 def closest_parameter(field: DistanceField, x: Float[Array, "2"]) -> Float[Array, ""]:

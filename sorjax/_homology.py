@@ -373,8 +373,9 @@ NEAR_CONIC = 0.05  # normalised units (the outline's RMS radius is sqrt 2)
 def conic_candidates(points_n: np.ndarray, n_dir: int = 12, conic=None):
     """For a nearly conic outline (a bowl seen from above): every line ``l`` through
     the conic's centre with its pole ``v = C^-1 l`` is an exact homology of the conic;
-    the outline's departure from the conic picks the right one, so these are starts."""
-    C, rms = fit_conic(points_n)
+    the outline's departure from the conic picks the right one, so these are starts.
+    ``conic`` is :func:`fit_conic`'s result when already at hand."""
+    C, rms = fit_conic(points_n) if conic is None else conic
     if rms > NEAR_CONIC:
         return []
     try:

@@ -11,7 +11,7 @@ import pytest
 
 import sorjax
 from sorjax import losses, scenes
-from sorjax._bundle import BundleProblem, axis_params, intrinsic_params, residuals, solve
+from sorjax._bundle import BundleProblem, axis_params, intrinsic_params, pole_polar_pairs, residuals, solve
 
 
 @pytest.fixture(scope="module")
@@ -39,6 +39,25 @@ def test_bundle_residuals_vanish_at_truth_and_match_public_loss(scene):
     np.testing.assert_allclose(np.asarray(pub * prob.weights).reshape(-1), np.asarray(r), atol=1e-9)
     # the bundle's axes are the pole-polar l_s = omega v_x: the true ones
     np.testing.assert_allclose(float(jax.jit(residuals)(y, prob) @ r), float(r @ r), rtol=1e-10)
+
+
+def test_axis_chart_gives_the_pole_polar_pairs(scene):
+    """The solver's chart (theta, rho) of l_s with v_x = omega^-1 l_s: at the truth it
+    gives the scene's own (v_x, l_s), and omega v_x is parallel to l_s everywhere."""
+    prob, y = problem_at_truth(scene, scene.outlines)
+    v, l = (np.asarray(a) for a in pole_polar_pairs(y, prob))
+    K = np.asarray(scene.K)
+    omega = np.linalg.inv(K).T @ np.linalg.inv(K)
+    for j, view in enumerate(scene.views):
+        for got, true in ((v[j], view.v_x), (l[j], view.l_s)):
+            np.testing.assert_allclose(np.abs(got @ true) / np.linalg.norm(got) / np.linalg.norm(true), 1.0, atol=1e-12)
+    rng = np.random.default_rng(0)
+    y2 = (y[0] + 0.05 * rng.normal(size=4), y[1] + 0.1 * rng.normal(size=y[1].shape))
+    v2, l2 = (np.asarray(a) for a in pole_polar_pairs(y2, prob))
+    fu, fv, u0, v0 = np.exp(y2[0][0]), np.exp(y2[0][1]), y2[0][2], y2[0][3]
+    Ki = np.linalg.inv(np.array([[fu, 0, u0], [0, fv, v0], [0, 0, 1.0]]))
+    m = v2 @ (Ki.T @ Ki)  # omega v_j, omega symmetric
+    np.testing.assert_allclose(np.cross(m, l2), 0.0, atol=1e-12 * np.abs(m).max())
 
 
 def test_solve_vmapped_over_trials_matches_loop(scene):

@@ -3,8 +3,10 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
-from sorjax._field import curve, make_field, signed_distance, signed_distances
+from sorjax import scenes
+from sorjax._field import _argmin, _nearest_knot, curve, make_field, signed_distance, signed_distances
 from sorjax._outline import make_outline
 
 A, B, CX, CY = 150.0, 90.0, 320.0, 240.0
@@ -30,8 +32,9 @@ def ellipse_field(n=512, dense=4000):
     return make_field(make_outline(pts, n).points)
 
 
-def test_distance_within_5px_is_accurate():
-    field = ellipse_field()
+@pytest.mark.parametrize("n", [512, 2048])  # 2048 (the default) takes the decimated search
+def test_distance_within_5px_is_accurate(n):
+    field = ellipse_field(n=n)
     rng = np.random.default_rng(0)
     t = rng.uniform(0, 2 * np.pi, 2000)
     r = rng.uniform(-5, 5, 2000)
@@ -87,3 +90,30 @@ def test_sign_convention_and_jit_vmap():
     np.testing.assert_allclose(np.asarray(jax.jit(signed_distances)(field, q)), eager, rtol=1e-12)
     assert eager[0] < 0 and eager[1] > 0 and eager[2] < 0
     np.testing.assert_allclose(eager[1:], [2.0, -1.0], atol=1e-3)
+
+
+def test_argmin_by_reductions_matches_jnp_argmin():
+    rng = np.random.default_rng(3)
+    d = rng.integers(0, 5, size=(200, 37)).astype(float)  # many ties: the first index wins
+    got = jax.jit(jax.vmap(_argmin))(jnp.asarray(d))
+    np.testing.assert_array_equal(np.asarray(got), np.argmin(d, axis=1))
+
+
+@pytest.mark.parametrize("profile", ["two_spheres", "wine_glass"])
+def test_nearest_knot_search_against_brute_force(profile):
+    """The three-pass search on 2048 knots (waist corner, thin stem) against the
+    nearest of all knots, for points up to ~8 px from the outline."""
+    if profile == "two_spheres":
+        o = scenes.two_spheres(700.0).outlines[0]
+    else:
+        sc = scenes.sor_scene(scenes.wine_glass(), scenes.intrinsics(800.0), [scenes.look_at((0.0, -0.4, -3.0), (0.0, 0.0, 0.0))])
+        o = sc.outlines[0]
+    field = make_field(make_outline(o, 2048).points)
+    rng = np.random.default_rng(0)
+    x = np.asarray(field.knots)[rng.integers(0, 2048, 4000)] + rng.normal(0, 3.0, (4000, 2))
+    got = np.asarray(jax.jit(jax.vmap(_nearest_knot, in_axes=(None, 0)))(field, jnp.asarray(x)))
+    d_all = np.linalg.norm(np.asarray(field.knots)[None, :, :] - x[:, None, :], axis=-1)
+    best = d_all.min(axis=1)
+    mine = d_all[np.arange(len(x)), got]
+    assert np.mean(mine == best) > 0.995
+    assert np.max(mine - best) < 0.2  # px: within the Newton steps' reach

@@ -19,6 +19,7 @@ import numpy as np
 from .. import scenes
 from .._calibration import RESULTS, calibrate
 from .._homology import fit_homology
+from .._outline import as_outlines
 from ._config import Config, SceneConfig
 
 
@@ -91,6 +92,7 @@ def run_trial(cfg: Config, row_index: int, row: dict, trial: int) -> dict:
     kw = dict(n_samples=cfg.fit.n_samples, n_points=cfg.fit.n_points)
     t0 = time.perf_counter()
     try:
+        outs = as_outlines(outs, cfg.fit.n_points)  # validated and resampled once for every method
         homs = tuple(fit_homology(o, **kw) for o in outs)
     except (ValueError, FloatingPointError) as e:
         rec["error"] = f"homology fit: {e}"
