@@ -222,7 +222,7 @@ def _correlated_meat(G, r, y, problem: BundleProblem, s2):
     return s2 * (G.T @ G + rho_1 * (C1 + C1.T) + 0.5 * rho_m * (Cm + Cm.T))
 
 
-def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max_steps: int = 200):
+def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max_steps: int = 200, inliers=None):
     """Run the bundle from each intrinsic seed and keep the lowest final cost.
 
     Args:
@@ -230,10 +230,14 @@ def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max
         l_seeds_n: (V, 3) per-view axes from the homology fits (normalised).
         intrinsic_seeds: list of ``(fu, fv, u0, v0)`` in normalised units.
         aspect: known aspect ratio ``fu / fv`` or None (free).
+        inliers: optional (V, N) 0/1 mask of the samples to use (the per-view robust
+            fits' ``Homology.inliers``); it multiplies the corner weights.
 
     Returns ``(y, result, steps, residuals, problem)`` of the best run.
     """
     fields, samples, weights = _setup(jnp.asarray(points_n), n_samples)
+    if inliers is not None:
+        weights = weights * jnp.asarray(inliers, dtype=weights.dtype)
     problem = BundleProblem(fields, samples, weights, jnp.asarray(np.nan if aspect is None else float(aspect)))
     a0 = axis_params(l_seeds_n)
     best = None

@@ -238,7 +238,8 @@ def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples):
         seeds = [(a * f, f, 0.0, 0.0) for f in (2.0, 5.0, 12.0)]
     pts_n = _normalised_points(outs, T)
     l_n = _axes_normalised(homologies, T)
-    y, res, steps, r, problem = fit_bundle(pts_n, l_n, seeds, aspect_ratio, n_samples)
+    y, res, steps, r, problem = fit_bundle(pts_n, l_n, seeds, aspect_ratio, n_samples,
+                                           inliers=_inlier_mask(homologies, n_samples))
     cov, s2 = covariance(y, problem, jnp.asarray(T))
     K, omega, vx, ls = solution_in_pixels(y, problem, jnp.asarray(T))
     ok = bool(res == optx.RESULTS.successful) and bool(np.all(np.isfinite(np.asarray(K))))
@@ -256,10 +257,22 @@ def _linearised_covariance(outs, homologies, K, T, aspect_ratio, n_samples):
     determine the intrinsics whatever the estimator (infinite where they don't)."""
     scale = 1.0 / T[0, 0]
     fields, samples, weights = _bundle_setup(jnp.asarray(_normalised_points(outs, T)), n_samples)
+    weights = weights * jnp.asarray(_inlier_mask(homologies, n_samples))
     problem = BundleProblem(fields, samples, weights, jnp.asarray(np.nan if aspect_ratio is None else float(aspect_ratio)))
     y = (intrinsic_params(T @ np.asarray(K), aspect_ratio is None), axis_params(_axes_normalised(homologies, T)))
     cov, s2 = covariance(y, problem, jnp.asarray(T))
     return np.asarray(cov) / (max(float(s2), 1e-300) * scale**2)
+
+
+def _inlier_mask(homologies, n_samples: int) -> np.ndarray:
+    """(V, N) 0/1: the samples each view's robust fit kept (all where it gives none).
+    Sample ``k`` is at the same curve parameter in the per-view fit and in the bundle
+    (both take ``n_samples`` points of the same spline), so the masks carry over."""
+    rows = []
+    for h in homologies:
+        m = None if h.inliers is None else np.asarray(h.inliers, dtype=np.float64)
+        rows.append(m if m is not None and m.shape == (n_samples,) else np.ones(n_samples))
+    return np.stack(rows)
 
 
 def _normalised_points(outs, T) -> np.ndarray:
@@ -287,6 +300,11 @@ def _axes_normalised(homologies, T) -> np.ndarray:
 ASYMMETRY_PX = 2.0
 ASYMMETRY_REL = 0.01
 WARN_ASYMMETRY_PX = 1.0
+# The robust per-view fit trims samples with no mirror image (a handle, a shadow); a
+# view that needs more than MAX_TRIMMED of its samples trimmed is not a surface of
+# revolution, and from NOTE_TRIMMED on the trimming is reported.
+MAX_TRIMMED = 0.4
+NOTE_TRIMMED = 0.02
 # An intrinsic is "not determined" when its standard deviation (the covariance at the
 # estimate, scaled by the residual -- at least RESIDUAL_FLOOR_PX when every v_x is at
 # infinity) is infinite or above UNDETERMINED times the focal length (for the
@@ -562,6 +580,14 @@ def calibrate(
                 "information (paper, Section 6). Dropped; use views where the body's profile shows."
             )
             dropped.append((i, "conic outline"))
+        elif h.trimmed > MAX_TRIMMED:
+            note(
+                f"view {i}: the outline is not symmetric: {100 * h.trimmed:.0f} % of its samples have no "
+                f"mirror image under the best harmonic homology (more than {100 * MAX_TRIMMED:.0f} % "
+                "cannot be a handle or a shadow on a surface of revolution). Dropped; check the "
+                "segmentation of this view."
+            )
+            dropped.append((i, f"not symmetric ({100 * h.trimmed:.0f} % of the outline trimmed)"))
         elif not np.isfinite(rms) or (rms > ASYMMETRY_PX and rms > ASYMMETRY_REL * radius):
             note(
                 f"view {i}: the outline is not symmetric: its best harmonic homology leaves an RMS "
@@ -572,6 +598,11 @@ def calibrate(
             )
             dropped.append((i, f"not symmetric (rms {rms:.3g} px)"))
         else:
+            if h.trimmed >= NOTE_TRIMMED:
+                note(
+                    f"view {i}: {100 * h.trimmed:.0f} % of the outline's samples have no mirror image (a "
+                    "handle, a shadow, an occlusion?) and were left out of the fit."
+                )
             if rms > WARN_ASYMMETRY_PX:
                 note(
                     f"view {i}: high symmetry residual ({rms:.3g} px): a noisy outline, or not quite a "

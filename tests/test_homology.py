@@ -100,3 +100,54 @@ def test_transfer_maps_outline_onto_itself(spheres):
     y = np.asarray(transfer(jnp.asarray(view.W), x))
     d = np.min(np.linalg.norm(view.outline[None, :, :] - y[:, None, :], axis=-1), axis=1)
     assert d.max() < 0.3  # within the dense outline's spacing
+
+
+def _with_handle(o, start, frac=0.12, height=8.0):
+    """Add a smooth outward bump (a 'handle', no mirror image) over ``frac`` of the outline."""
+    o = np.asarray(o, float)
+    t = (np.arange(len(o)) / len(o) - start) % 1.0
+    bump = np.sin(np.pi * np.minimum(t, frac) / frac) ** 2 * (t < frac) * height
+    tan = np.roll(o, -1, 0) - np.roll(o, 1, 0)
+    nrm = np.stack([tan[:, 1], -tan[:, 0]], 1) / np.linalg.norm(tan, axis=1, keepdims=True)
+    out = o + bump[:, None] * nrm
+    return out if abs(sorjax_area(out)) > abs(sorjax_area(o)) else o - bump[:, None] * nrm
+
+
+def sorjax_area(p):
+    from sorjax._outline import signed_area
+
+    return float(signed_area(p))
+
+
+@pytest.fixture(scope="module")
+def vase_with_handle():
+    K = scenes.intrinsics(800.0)
+    sc = scenes.sor_scene(scenes.vase(), K, [scenes.look_at((0.8, -0.5, -1.6), (0.0, 0.0, 0.0), roll=0.3)])
+    return sc, _with_handle(sc.outlines[0], 0.15)
+
+
+def test_robust_fit_trims_a_handle(vase_with_handle):
+    sc, out = vase_with_handle
+    K, view = sc.K, sc.views[0]
+    plain = sorjax.fit_homology(out, robust=False)
+    robust = sorjax.fit_homology(out)
+    err = lambda h: float(angle_between_planes(K, h.l_s, view.l_s))  # noqa: E731
+    assert plain.trimmed == 0.0 and err(plain) > 0.1  # the handle drags the plain fit
+    assert err(robust) < 0.02 and float(robust.rms) < 0.3 < float(plain.rms)
+    assert 0.05 < robust.trimmed < 0.4  # the handle and its mirror image
+    r = np.asarray(robust.inliers)
+    assert r.shape == (100,) and r.dtype == bool
+
+
+def test_robust_fit_leaves_noisy_outlines_alone(spheres):
+    o = scenes.paper_noise(spheres.outlines[0], 1.0, np.random.default_rng(5))
+    a, b = sorjax.fit_homology(o), sorjax.fit_homology(o, robust=False)
+    assert a.trimmed == 0.0
+    np.testing.assert_allclose(np.asarray(a.l_s), np.asarray(b.l_s), atol=1e-12)
+
+
+def test_calibrate_reports_trimmed_views(vase_with_handle):
+    sc, out = vase_with_handle
+    with pytest.warns(UserWarning, match="no mirror image"):
+        cal = sorjax.calibrate([out, out + np.array([40.0, 10.0])], method="IIb")
+    assert any("no mirror image" in n for n in cal.notes)
