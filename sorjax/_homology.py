@@ -86,6 +86,10 @@ class Homology(eqx.Module):
         inliers: (N,) the samples the fit kept (robust fit: samples whose residual
             is an outlier, e.g. on a mug's handle, are trimmed); ``rms`` and ``cost``
             are over these.  None for homologies built by hand.
+        rms_untrimmed: RMS symmetry residual (px) of the fit to all samples, before
+            any trimming: :func:`sorjax.calibrate` judges whether a view is symmetric
+            at all by it, so that trimming never makes an asymmetric outline (a
+            segmentation leak) pass.  None for homologies built by hand.
     """
 
     l_s: Float[Array, "3"]
@@ -98,6 +102,7 @@ class Homology(eqx.Module):
     conic_rms: Float[Array, ""]
     infinity_z: Float[Array, ""] | None = None
     inliers: Bool[Array, " N"] | None = None
+    rms_untrimmed: Float[Array, ""] | None = None
 
     @property
     def trimmed(self) -> float:
@@ -510,6 +515,7 @@ def fit_homology(
     else:
         cands = bitangent_candidates(pn) + mirror_candidates(pn, samples) + conic_candidates(pn, conic=conic)
     fit = _refine_candidates(field, samples, weights, cands, max_steps=max_steps)
+    rms_all = float(np.sqrt(fit[2] / max(float(jnp.sum(weights)), 1.0))) * scale
     inliers = np.ones(n_samples, bool)
     if robust:
         fit, inliers = _robust_refits(field, samples, weights, fit, scale, max_steps)
@@ -517,4 +523,5 @@ def fit_homology(
     w = weights * jnp.asarray(inliers, dtype=weights.dtype)
     z = _infinity_z(field, samples, w, jnp.asarray(v), jnp.asarray(l), jnp.asarray(cost))
     hom = _to_pixels(T, v, l, cost, ok, steps, scale, float(jnp.sum(w)), conic[1], z)
-    return eqx.tree_at(lambda h: h.inliers, hom, jnp.asarray(inliers), is_leaf=lambda x: x is None)
+    return eqx.tree_at(lambda h: (h.inliers, h.rms_untrimmed), hom, (jnp.asarray(inliers), jnp.asarray(rms_all)),
+                       is_leaf=lambda x: x is None)
