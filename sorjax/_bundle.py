@@ -222,6 +222,16 @@ def _correlated_meat(G, r, y, problem: BundleProblem, s2):
     return s2 * (G.T @ G + rho_1 * (C1 + C1.T) + 0.5 * rho_m * (Cm + Cm.T))
 
 
+def make_problem(points_n, n_samples: int, aspect=None, inliers=None) -> BundleProblem:
+    """The :class:`BundleProblem` of (V, M, 2) normalised outline points: fields,
+    ``n_samples`` samples per view, their corner weights times the optional (V, N)
+    0/1 ``inliers`` mask; ``aspect`` the known ``fu / fv`` or None (free)."""
+    fields, samples, weights = _setup(jnp.asarray(points_n), n_samples)
+    if inliers is not None:
+        weights = weights * jnp.asarray(inliers, dtype=weights.dtype)
+    return BundleProblem(fields, samples, weights, jnp.asarray(np.nan if aspect is None else float(aspect)))
+
+
 def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max_steps: int = 200, inliers=None):
     """Run the bundle from each intrinsic seed and keep the lowest final cost.
 
@@ -235,10 +245,7 @@ def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max
 
     Returns ``(y, result, steps, residuals, problem)`` of the best run.
     """
-    fields, samples, weights = _setup(jnp.asarray(points_n), n_samples)
-    if inliers is not None:
-        weights = weights * jnp.asarray(inliers, dtype=weights.dtype)
-    problem = BundleProblem(fields, samples, weights, jnp.asarray(np.nan if aspect is None else float(aspect)))
+    problem = make_problem(points_n, n_samples, aspect, inliers)
     a0 = axis_params(l_seeds_n)
     best = None
     for fu, fv, u0, v0_ in intrinsic_seeds:

@@ -17,8 +17,7 @@ from jaxtyping import Array, Float, Int
 
 from ._camera import normalising_transform, transform_points
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
-from ._bundle import BundleProblem, axis_params, covariance, fit_bundle, intrinsic_params, solution_in_pixels
-from ._bundle import _setup as _bundle_setup
+from ._bundle import axis_params, covariance, fit_bundle, intrinsic_params, make_problem, solution_in_pixels
 from ._linear import linear_in_pixels
 from ._outline import DEFAULT_POINTS, as_outlines
 
@@ -256,9 +255,7 @@ def _linearised_covariance(outs, homologies, K, T, aspect_ratio, n_samples):
     at ``K`` with the per-view fits' axes.  It measures how well these views
     determine the intrinsics whatever the estimator (infinite where they don't)."""
     scale = 1.0 / T[0, 0]
-    fields, samples, weights = _bundle_setup(jnp.asarray(_normalised_points(outs, T)), n_samples)
-    weights = weights * jnp.asarray(_inlier_mask(homologies, n_samples))
-    problem = BundleProblem(fields, samples, weights, jnp.asarray(np.nan if aspect_ratio is None else float(aspect_ratio)))
+    problem = make_problem(_normalised_points(outs, T), n_samples, aspect_ratio, _inlier_mask(homologies, n_samples))
     y = (intrinsic_params(T @ np.asarray(K), aspect_ratio is None), axis_params(_axes_normalised(homologies, T)))
     cov, s2 = covariance(y, problem, jnp.asarray(T))
     return np.asarray(cov) / (max(float(s2), 1e-300) * scale**2)
