@@ -36,19 +36,8 @@ WIDTH, HEIGHT = 640, 480
 
 
 def pose_at(profile, K, el_deg, az_deg, roll=0.0, pix=None, frac=0.5):
-    """Camera looking at the object's centre O (on its axis) from elevation ``el_deg``
-    and azimuth ``az_deg`` (upright object), rolled by ``roll`` rad, then moved parallel
-    to the image plane so that O lands at pixel ``pix``.  ``pix=None`` keeps O at the
-    principal point: the optical axis meets the revolution axis and v_x is at infinity."""
-    O = np.array([0.0, 0.5 * (profile.y0 + profile.y1), 0.0])
-    Rb = math.hypot(0.5 * (profile.y1 - profile.y0), profile.r_max)
-    D = 2.0 * math.sqrt(K[0, 0] * K[1, 1]) * Rb / (frac * HEIGHT)
-    el, az = math.radians(el_deg), math.radians(az_deg)
-    u = np.array([math.cos(el) * math.sin(az), math.sin(el), math.cos(el) * math.cos(az)])
-    R, _ = scenes.look_at(O + D * u, O, (0.0, 1.0, 0.0), roll)
-    pix = (K[0, 2], K[1, 2]) if pix is None else pix
-    c_cam = np.array([(pix[0] - K[0, 2]) * D / K[0, 0], (pix[1] - K[1, 2]) * D / K[1, 1], D])
-    return R, c_cam - R @ O
+    """:func:`sorjax.scenes.pose_at_pixel` for a 480-px-high image."""
+    return scenes.pose_at_pixel(profile, K, el_deg, az_deg, roll, pix, fill=frac, image_height=HEIGHT)
 
 
 def posed_scene(specs, K=None, profile=None):

@@ -264,6 +264,20 @@ def _start_at_top(p: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------------
 
 
+def _unit_range(a: np.ndarray, what: str, meaning: str, fix: str, tol: float) -> np.ndarray:
+    """A float ``mask`` or ``image`` checked to be finite and within [0, 1] (+- tol),
+    returned as float64 clipped to [0, 1]; otherwise a ValueError saying how to fix it."""
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{what} contains NaN or infinite values")
+    lo, hi = float(a.min()), float(a.max())
+    if lo < -tol or hi > 1.0 + tol:
+        raise ValueError(
+            f"a float {what} must hold values in [0, 1]{' ' + meaning if meaning else ''}; got values in "
+            f"[{lo:g}, {hi:g}]. {fix}"
+        )
+    return np.clip(a.astype(np.float64), 0.0, 1.0)
+
+
 def _as_field(mask, label) -> np.ndarray:
     """The mask as a float64 field in [0, 1] (1 = object), with clear errors."""
     if isinstance(mask, (str, bytes)) or mask is None:
@@ -298,16 +312,8 @@ def _as_field(mask, label) -> np.ndarray:
     if m.dtype == bool:
         return m.astype(np.float64)
     if np.issubdtype(m.dtype, np.floating):
-        if not np.all(np.isfinite(m)):
-            raise ValueError("mask contains NaN or infinite values")
-        lo, hi = float(m.min()), float(m.max())
-        if lo < -1e-9 or hi > 1.0 + 1e-9:
-            raise ValueError(
-                f"a float mask must hold values in [0, 1] (0 background, 1 object, fractions "
-                f"at anti-aliased edges); got values in [{lo:g}, {hi:g}]. Divide an 8-bit mask "
-                "by 255, or pass a label image with label=VALUE"
-            )
-        return np.clip(m.astype(np.float64), 0.0, 1.0)
+        return _unit_range(m, "mask", "(0 background, 1 object, fractions at anti-aliased edges)",
+                           "Divide an 8-bit mask by 255, or pass a label image with label=VALUE", 1e-9)
     # integer masks
     lo, hi = int(m.min()), int(m.max())
     if lo >= 0 and hi <= 1:
@@ -505,15 +511,7 @@ def _as_bgr(image) -> tuple[np.ndarray, np.ndarray]:
     elif im.dtype == np.uint16:
         f = im.astype(np.float64) / 257.0
     elif np.issubdtype(im.dtype, np.floating):
-        if not np.all(np.isfinite(im)):
-            raise ValueError("image contains NaN or infinite values")
-        lo, hi = float(im.min()), float(im.max())
-        if lo < -1e-6 or hi > 1.0 + 1e-6:
-            raise ValueError(
-                f"a float image must hold values in [0, 1]; got [{lo:g}, {hi:g}] (convert "
-                "8-bit data to uint8, or divide by 255)"
-            )
-        f = np.clip(im.astype(np.float64), 0.0, 1.0) * 255.0
+        f = _unit_range(im, "image", "", "Convert 8-bit data to uint8, or divide by 255", 1e-6) * 255.0
     else:
         raise ValueError(f"image dtype must be uint8, uint16 or float, got {im.dtype}")
     if f.shape[2] == 1:

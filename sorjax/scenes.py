@@ -97,6 +97,7 @@ __all__ = [
     "camera_matrix",
     "camera_centre",
     "look_at",
+    "pose_at_pixel",
     "harmonic_homology",
     "view_truth",
     "sphere_image_conic",
@@ -319,6 +320,30 @@ def look_at(camera_centre, target, up=(0.0, 1.0, 0.0), roll: float = 0.0):
     c, s = math.cos(roll), math.sin(roll)
     R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ np.stack([x, y, z])
     return R, -R @ C
+
+
+def pose_at_pixel(profile, K, elevation_deg: float, azimuth_deg: float, roll: float = 0.0, pixel=None,
+                  fill: float = 0.5, image_height: float = 480.0):
+    """Pose ``(R, t)`` of a camera that sees the upright ``profile``'s centre ``O`` (on
+    its axis, half-way up) at ``pixel`` (px; None: the principal point).
+
+    The camera looks at ``O`` from elevation ``elevation_deg`` and azimuth
+    ``azimuth_deg`` (degrees, about the object's axis ``y``), rolled by ``roll`` rad
+    (:func:`look_at`), at the distance where the object's bounding sphere spans
+    ``fill`` of ``image_height``; it is then moved parallel to the image plane so
+    that ``O`` lands at ``pixel``.  With ``pixel=None`` the optical axis meets the
+    revolution axis and ``v_x`` is at infinity (the degenerate views of the paper's
+    Section 6)."""
+    K = np.asarray(K, dtype=np.float64)
+    O = np.array([0.0, 0.5 * (profile.y0 + profile.y1), 0.0])
+    Rb = math.hypot(0.5 * (profile.y1 - profile.y0), profile.r_max)
+    D = 2.0 * math.sqrt(K[0, 0] * K[1, 1]) * Rb / (fill * image_height)
+    el, az = math.radians(elevation_deg), math.radians(azimuth_deg)
+    u = np.array([math.cos(el) * math.sin(az), math.sin(el), math.cos(el) * math.cos(az)])
+    R, _ = look_at(O + D * u, O, (0.0, 1.0, 0.0), roll)
+    pix = (K[0, 2], K[1, 2]) if pixel is None else pixel
+    c_cam = np.array([(pix[0] - K[0, 2]) * D / K[0, 0], (pix[1] - K[1, 2]) * D / K[1, 1], D])
+    return R, c_cam - R @ O
 
 
 def harmonic_homology(v, l) -> np.ndarray:

@@ -24,18 +24,7 @@ GOOD = [(30, 0, 0.3, (150, 150)), (-10, 70, -0.5, (480, 350)), (50, 200, 1.0, (2
 
 
 def pose_at(profile, K, el_deg, az_deg, roll=0.0, pix=None):
-    """Look at the object's centre O (on its axis), then move the camera parallel to the
-    image plane so that O lands at ``pix`` (None: at the principal point, where the
-    optical axis meets the revolution axis and v_x is at infinity)."""
-    O = np.array([0.0, 0.5 * (profile.y0 + profile.y1), 0.0])
-    Rb = math.hypot(0.5 * (profile.y1 - profile.y0), profile.r_max)
-    D = 2.0 * math.sqrt(K[0, 0] * K[1, 1]) * Rb / (0.5 * HEIGHT)
-    el, az = math.radians(el_deg), math.radians(az_deg)
-    u = np.array([math.cos(el) * math.sin(az), math.sin(el), math.cos(el) * math.cos(az)])
-    R, _ = scenes.look_at(O + D * u, O, (0.0, 1.0, 0.0), roll)
-    pix = (K[0, 2], K[1, 2]) if pix is None else pix
-    c_cam = np.array([(pix[0] - K[0, 2]) * D / K[0, 0], (pix[1] - K[1, 2]) * D / K[1, 1], D])
-    return R, c_cam - R @ O
+    return scenes.pose_at_pixel(profile, K, el_deg, az_deg, roll, pix, image_height=HEIGHT)
 
 
 def posed(specs):
