@@ -52,7 +52,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from ._camera import normalising_transform, transform_points
 from ._field import DistanceField, curve_points, make_field, sample_weights, signed_distances
-from ._outline import DEFAULT_POINTS, Outline, make_outline, perimeter
+from ._outline import DEFAULT_POINTS, make_outline, perimeter
 
 DEFAULT_SAMPLES = 100
 INFINITY_Z = 3.0
