@@ -42,7 +42,7 @@ def scene_errors(sc, aspect_known):
         a = aspect_known if m in ("I", "IIb") else None
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            cal = sorjax.calibrate(sc.outlines, method=m, aspect_ratio=a, homologies=homs)
+            cal = sorjax.calibrate(sc.outlines, method=m, aspect_ratio=a, homologies=homs, outline_error=0.0)
         e = np.array([cal.fu - K[0, 0], cal.fv - K[1, 1], cal.u0 - K[0, 2], cal.v0 - K[1, 2]]) / f * 100
         errs[m] = float(np.max(np.abs(e))) if cal.success and np.all(np.isfinite(e)) else np.inf
     return dl, dv, errs

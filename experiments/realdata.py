@@ -51,6 +51,7 @@ SETS = (
     "linemod",
 )
 AXIS_TARGET_DEG = 0.5
+DATA_ROOT = [DEFAULT_DATA]  # the data folder in use (set by main)
 
 
 @dataclass
@@ -218,6 +219,12 @@ def calibrate_set(views: list[View], K_true: np.ndarray, set_name: str) -> list[
         )
         return lines
     truth = np.array([K_true[0, 0], K_true[1, 1], K_true[0, 2], K_true[1, 2]])
+    image_size = None
+    for v in usable:
+        img = cv2.imread(str(DATA_ROOT[0] / v.set / v.image), cv2.IMREAD_UNCHANGED)
+        if img is not None:
+            image_size = (img.shape[1], img.shape[0])
+            break
     for ar, ar_name in ((1.0, "aspect 1"), (None, "aspect free")):
         t0 = time.perf_counter()
         res, ws = recorded(
@@ -297,6 +304,7 @@ def main(argv=None) -> int:
         )
         return 2
     t_start = time.perf_counter()
+    DATA_ROOT[0] = args.data
     all_views: dict[str, list[View]] = {}
     metas = {}
     for s in args.sets.split(","):

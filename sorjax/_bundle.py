@@ -128,6 +128,42 @@ def solve(y0, problem: BundleProblem, max_steps: int = 200):
     return sol.value, sol.result, sol.stats["num_steps"], residuals(sol.value, problem)
 
 
+# The no-perspective reference: the focal length held at ORTHO_LOG_F (log of a focal
+# length in the calibration's normalised units, where the outlines span about 1:
+# e^9.2 ~ 1e4, a field of view of about 0.01 degree), so that every v_x is at
+# infinity and each outline's symmetry is an affine (skew) reflection.
+ORTHO_LOG_F = 9.2
+
+
+@functools.partial(jax.jit, static_argnames=("max_steps",))
+def orthographic_cost(y, problem: BundleProblem, max_steps: int = 100):
+    """Cost (normalised units^2, summed over the samples) of the best camera with no
+    perspective, started from the bundle's solution ``y``.
+
+    The focal length is held at ``exp(ORTHO_LOG_F)`` (orthographic limit) and the
+    principal point at ``y``'s (it no longer matters there); the per-view axes and, for
+    free aspect, the ratio ``fu / fv`` are fitted.  ``cost - |r(y)|^2`` is the evidence
+    for perspective in the outlines, the only thing that fixes the focal length: when
+    it is no larger than noise or systematic errors of the outlines could make, the
+    focal length is not determined, whatever the bundle's covariance says (that
+    linearisation can be confident far from the truth under weak perspective)."""
+    k0, a0 = y
+    free = k0.shape[0] == 4
+    logf = jnp.asarray(ORTHO_LOG_F, k0.dtype)
+
+    def res(z, args):
+        if free:  # z = (log(fu / fv), axes)
+            d, a = z
+            k = jnp.concatenate([jnp.stack([logf + d / 2, logf - d / 2]), k0[2:]])
+        else:  # z = axes
+            a, k = z, jnp.concatenate([logf[None], k0[1:]])
+        return residuals((k, a), problem)
+
+    z0 = (k0[0] - k0[1], a0) if free else a0
+    sol = optx.least_squares(res, _SOLVER, z0, max_steps=max_steps, throw=False)
+    return jnp.sum(res(sol.value, None) ** 2)
+
+
 @jax.jit
 def solution_in_pixels(y, problem: BundleProblem, T):
     """``(K, omega, v_x, l_s)`` in pixels for the parameters ``y`` (normalised by the

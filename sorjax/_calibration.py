@@ -17,7 +17,8 @@ from jaxtyping import Array, Float, Int
 
 from ._camera import normalising_transform, transform_points
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
-from ._bundle import axis_params, covariance, fit_bundle, intrinsic_params, make_problem, solution_in_pixels
+from ._bundle import (axis_params, covariance, fit_bundle, intrinsic_params, make_problem, orthographic_cost,
+                      solution_in_pixels)
 from ._linear import linear_in_pixels
 from ._outline import DEFAULT_POINTS, as_outlines
 
@@ -94,6 +95,12 @@ class Calibration(eqx.Module):
             views were dropped, which intrinsics are or are not determined, what to add.
         dropped: ``(view index, reason)`` for each view left out.
         notes: every warning :func:`calibrate` issued for this calibration, in order.
+        perspective_px: the evidence for perspective in the outlines (bundle only): how
+            much worse, in px RMS per sample, the best camera with no perspective
+            (orthographic, every v_x at infinity) fits them.  Only perspective fixes
+            the focal length; see ``outline_error`` in :func:`calibrate`.
+        perspective_z: the same evidence in units of the symmetry noise,
+            ``sqrt(delta cost / s^2)`` (a z-score against "no perspective").
     """
 
     K: Float[Array, "3 3"]
@@ -112,6 +119,8 @@ class Calibration(eqx.Module):
     details: str = eqx.field(static=True, default="")
     dropped: tuple[tuple[int, str], ...] = eqx.field(static=True, default=())
     notes: tuple[str, ...] = eqx.field(static=True, default=())
+    perspective_px: float = eqx.field(static=True, default=math.nan)
+    perspective_z: float = eqx.field(static=True, default=math.nan)
 
     @property
     def std(self) -> np.ndarray:
@@ -218,8 +227,11 @@ def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples):
     keep the solution of lowest cost: one linear seed can be far off when a view is
     weak.  With no positive-definite linear seed, a spread of plausible cameras.
 
-    Returns ``(K, omega, code, cov, cost, view_rms, steps, v_x, l_s, s_px)``; ``K`` is
-    the raw estimate (not yet masked on failure), ``s_px`` the residual standard error."""
+    Returns ``(K, omega, code, cov, cost, view_rms, steps, v_x, l_s, s_px, evidence)``;
+    ``K`` is the raw estimate (not yet masked on failure), ``s_px`` the residual
+    standard error, ``evidence = (delta_px2, n)`` the cost (px^2) by which the best
+    camera with no perspective fits worse (:func:`sorjax._bundle.orthographic_cost`)
+    and the number of samples it is summed over."""
     scale = 1.0 / T[0, 0]
     a = 1.0 if aspect_ratio is None else float(aspect_ratio)
     seeds = []
@@ -241,12 +253,14 @@ def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples):
                                            inliers=_inlier_mask(homologies, n_samples))
     cov, s2 = covariance(y, problem, jnp.asarray(T))
     K, omega, vx, ls = solution_in_pixels(y, problem, jnp.asarray(T))
+    delta = (float(orthographic_cost(y, problem)) - float(jnp.sum(r**2))) * scale**2
+    evidence = (delta, float(jnp.sum(problem.weights)))
     ok = bool(res == optx.RESULTS.successful) and bool(np.all(np.isfinite(np.asarray(K))))
     code = RESULTS.successful if ok else RESULTS.not_converged
     rv = np.asarray(r).reshape(len(outs), -1) * scale
     view_rms = jnp.asarray(np.sqrt(np.mean(rv**2, axis=1)))
     cost = jnp.asarray(np.sum(rv**2))
-    return K, omega, code, cov, cost, view_rms, steps, vx, ls, float(np.sqrt(s2)) * scale
+    return K, omega, code, cov, cost, view_rms, steps, vx, ls, float(np.sqrt(s2)) * scale, evidence
 
 
 def _linearised_covariance(outs, homologies, K, T, aspect_ratio, n_samples):
@@ -313,16 +327,37 @@ NOTE_TRIMMED = 0.02
 # determined): a 3-sigma interval reaching zero.
 UNDETERMINED = 1.0 / 3.0
 # A focal length below MIN_FOCAL_FRACTION of the extent of the outlines (their
-# bounding box's larger side, px) would put them across a field of view of about
-# 150 degrees or more: a collapsed estimate (seen on real photographs with weak
-# perspective, where f fell to 1..25 px with a small std), never "determined".
-MIN_FOCAL_FRACTION = 0.25
+# bounding box's larger side, px) would put them across more than 90 degrees of view,
+# where a lens without distortion (sorjax's model) is implausible: a collapsed
+# estimate, never "determined" -- nor is the principal point estimated with it.  Seen
+# on real photographs with weak perspective and imperfect outlines: f fell to 1..25 px,
+# and to 168 px (nocs-real275, true 590) and 177 px (ycb-video, true 1067) with a std
+# of 13-15 px and the principal point 7 to 20 std off.
+MIN_FOCAL_FRACTION = 0.5
 # Weak geometry: warn when the relative standard deviation of a focal length exceeds
 # WEAK_REL_STD, the covariance scaled by the residual but at least RESIDUAL_FLOOR_PX
 # (about the accuracy of good sub-pixel outlines), so that a configuration that only
 # noise-free outlines could calibrate is flagged too.
 WEAK_REL_STD = 0.05
 RESIDUAL_FLOOR_PX = 0.1
+# Perspective evidence (bundle).  Only perspective fixes the focal length, and under
+# weak perspective an outline shows very little of it (a 5 % focal error changes the
+# symmetry of typical outlines by about 0.25 px).  Systematic errors of the outlines
+# (segmentation bias, lens distortion, an object that is not quite a surface of
+# revolution) hide from the symmetry residual but can fake or cancel that much, and the
+# bundle's covariance, a linearisation at its own estimate, can then be confident far
+# from the truth.  So the focal length counts as determined only when the best camera
+# with no perspective (:func:`sorjax._bundle.orthographic_cost`) fits the outlines worse
+# by a cost delta with sqrt(delta / s^2) >= PERSPECTIVE_Z (the noise cannot explain it)
+# and sqrt(delta / n) >= PERSPECTIVE_FACTOR * outline_error px (nor can a systematic
+# error of the outlines of `outline_error` px RMS: a fully aligned one changes the cost
+# by n outline_error^2).  Measured on real photographs (experiments/realdata.py): the
+# sets that gave a confident wrong K showed 0.09 to 0.19 px of perspective
+# (nvlabs-6dof-graspnet: f 271 +- 16 px for a true 616); the two-sphere scene shows
+# 0.7 to 0.8 px at f = 700 and 0.14 to 0.28 px at f = 1400 (1 to 2 px of noise).
+OUTLINE_ERROR_PX = 0.1
+PERSPECTIVE_Z = 3.0
+PERSPECTIVE_FACTOR = 3.0
 # Advice thresholds (which extra view would help).
 PARALLEL_AXES_DEG = 10.0
 NEAR_AXIS_DEG = 10.0
@@ -420,7 +455,8 @@ def _fmt_std(x, sd):
     return f"{x:.1f} +- {sd:.2g}" if np.isfinite(sd) else f"{x:.1f} +- inf"
 
 
-def _assess(K, cov_unit, s_px, outs, vx, ls, free_aspect: bool, used=None, floor_verdict: bool = False):
+def _assess(K, cov_unit, s_px, outs, vx, ls, free_aspect: bool, used=None, floor_verdict: bool = False,
+            perspective_ok: bool = True, image_size=None):
     """Which intrinsics the views determine.  Returns ``(determined (4,) bool, std (4,),
     weak or None, advice)`` for the raw estimate ``K`` (pixels), the covariance per
     px^2 of residual ``cov_unit`` and the residual standard error ``s_px``.  ``std``
@@ -428,7 +464,12 @@ def _assess(K, cov_unit, s_px, outs, vx, ls, free_aspect: bool, used=None, floor
     infinity, where theory says the focal length is free), for
     ``max(s_px, RESIDUAL_FLOOR_PX)``, so that the estimate must fix the focal length
     robustly to override that.  ``weak`` is the relative std of a focal length at
-    ``max(s_px, RESIDUAL_FLOOR_PX)`` when above ``WEAK_REL_STD``."""
+    ``max(s_px, RESIDUAL_FLOOR_PX)`` when above ``WEAK_REL_STD``.  Without enough
+    evidence for perspective (``perspective_ok`` False), with a collapsed focal length
+    (below ``MIN_FOCAL_FRACTION`` of the outlines' extent) or with the principal point
+    outside the image (``image_size = (width, height)``, when given) nothing is
+    determined: an estimate that rests on systematic errors of the outlines, not on
+    their perspective."""
     K = np.asarray(K)
     est = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
     var = np.diag(np.asarray(cov_unit))
@@ -437,13 +478,11 @@ def _assess(K, cov_unit, s_px, outs, vx, ls, free_aspect: bool, used=None, floor
     std_floor = std / max(s_px, 1e-300) * s_floor
     judged = std_floor if floor_verdict else std
     radius = np.sqrt(np.mean([_outline_radius(o) ** 2 for o in outs]))
-    pts = np.concatenate([np.asarray(getattr(o, "points", o)).reshape(-1, 2) for o in outs])
-    extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
-    plausible = np.abs(est[:2]) >= MIN_FOCAL_FRACTION * extent  # else a collapsed estimate
-    focal_ok = np.isfinite(std[:2]) & (judged[:2] <= UNDETERMINED * np.abs(est[:2])) & plausible
+    plausible = not _implausible(est, outs, image_size)
+    focal_ok = np.isfinite(std[:2]) & (judged[:2] <= UNDETERMINED * np.abs(est[:2]))
     ref = np.sqrt(abs(est[0] * est[1])) if focal_ok.all() else radius
     pp_ok = np.isfinite(std[2:]) & (judged[2:] <= UNDETERMINED * ref)
-    determined = np.concatenate([focal_ok, pp_ok])
+    determined = np.concatenate([focal_ok, pp_ok]) & plausible & perspective_ok
     weak = None
     rel_floor = std_floor[:2] / np.abs(est[:2])
     aspect_weak = free_aspect and not determined.all()
@@ -455,6 +494,29 @@ def _assess(K, cov_unit, s_px, outs, vx, ls, free_aspect: bool, used=None, floor
             aspect_weak = bool(np.sqrt(max(q, 0.0)) * s_floor > WEAK_REL_STD)
     advice = _advice(K, vx, ls, outs, free_aspect, aspect_weak, used)
     return determined, std, weak, advice
+
+
+def _implausible(est, outs, image_size=None) -> str:
+    """Why the estimate ``(fu, fv, u0, v0)`` (px) is implausible for a camera without
+    lens distortion that took these outlines (empty when it is not)."""
+    pts = np.concatenate([np.asarray(getattr(o, "points", o)).reshape(-1, 2) for o in outs])
+    extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+    f = float(np.min(np.abs(est[:2])))
+    if f < MIN_FOCAL_FRACTION * extent:
+        deg = 2.0 * math.degrees(math.atan(extent / (2.0 * max(f, 1e-300))))
+        return (
+            f"the estimate (f = {f:.0f} px) would put outlines {extent:.0f} px apart across {deg:.0f} deg of "
+            "view, which a lens without distortion does not do: the outlines' errors, not their "
+            "perspective, made it"
+        )
+    if image_size is not None:
+        w, h = image_size
+        if not (-0.5 <= est[2] <= w - 0.5 and -0.5 <= est[3] <= h - 0.5):
+            return (
+                f"the estimated principal point ({est[2]:.0f}, {est[3]:.0f}) lies outside the {w}x{h} image: "
+                "the outlines' errors, not their perspective, made it"
+            )
+    return ""
 
 
 def _nan_calibration(homologies, result, method, a, used, details, dropped, notes, K=None, cov=None, rms=None,
@@ -507,6 +569,8 @@ def calibrate(
     n_samples: int = DEFAULT_SAMPLES,
     n_points: int = DEFAULT_POINTS,
     homologies=None,
+    outline_error: float = OUTLINE_ERROR_PX,
+    image_size: tuple[int, int] | None = None,
     throw: bool = False,
 ) -> Calibration:
     """Calibrate a camera from the outlines of surfaces of revolution.
@@ -523,6 +587,17 @@ def calibrate(
         n_samples: samples per outline in the homology fit (eq. 20).
         n_points: resampled outline size for the distance fields.
         homologies: optional precomputed per-view :class:`Homology` fits.
+        outline_error: the systematic error (px RMS) the outlines may carry that their
+            symmetry residual does not show: segmentation bias, lens distortion, an
+            object that is not quite a surface of revolution.  The bundle counts the
+            focal length as determined only when the outlines show at least
+            ``PERSPECTIVE_FACTOR`` (3) times this much perspective (see
+            ``Calibration.perspective_px``).  The default, 0.1 px, is about the
+            accuracy of good sub-pixel outlines of real objects; pass 0 for exact
+            outlines with only random noise (synthetic studies).
+        image_size: ``(width, height)`` of the images in px, when known: an estimate
+            with the principal point outside the image is then reported as not
+            determined (it is made by the outlines' errors).
         throw: raise :class:`CalibrationError` instead of returning a failed result.
 
     Returns:
@@ -543,12 +618,28 @@ def calibrate(
       (:attr:`Homology.v_x_at_infinity`) -- or the estimate failed -- only the principal
       point is estimable: ``RESULTS.only_principal_point`` with the least-squares
       intersection of the ``l_s`` in ``K[:2, 2]`` and NaN focal lengths;
+    * the bundle's focal length is not determined when the outlines show too little
+      perspective (``outline_error``): the best camera with no perspective must fit
+      them clearly worse, beyond their noise and their systematic error;
     * a successful calibration whose focal length has a relative standard deviation
       above ``WEAK_REL_STD`` (5 %; residual taken as at least 0.1 px) gives a warning
       saying what kind of extra view would help.
     """
     _check_method(method, aspect_ratio)
     _check_sizes(n_samples, n_points)
+    if isinstance(outline_error, bool) or not isinstance(outline_error, (int, float, np.integer, np.floating)) or not (
+        math.isfinite(outline_error) and outline_error >= 0
+    ):
+        raise ValueError(f"outline_error must be a finite number of pixels >= 0; got {outline_error!r}.")
+    if image_size is not None:
+        try:
+            iw, ih = (int(x) for x in image_size)
+            if iw <= 0 or ih <= 0 or (iw, ih) != tuple(image_size):
+                raise ValueError
+        except (TypeError, ValueError):
+            raise ValueError(f"image_size must be (width, height) in pixels, two positive integers; got "
+                             f"{image_size!r}.") from None
+        image_size = (iw, ih)
     outs = as_outlines(outlines, n_points)
     if len(outs) < 2:
         raise ValueError(
@@ -666,11 +757,15 @@ def calibrate(
     # estimable, unless the joint estimate below does determine the focal length
     all_at_infinity = all(h.v_x_at_infinity for h in homs_u)
     T = normalising_transform(np.concatenate([np.asarray(o.points) for o in outs_u]))
+    perspective_ok, g_px, z_persp = True, math.nan, math.nan
     if method == "bundle":
-        K, omega, code, cov, cost, view_rms, steps, vx, ls, s_px = _bundle_calibration(
+        K, omega, code, cov, cost, view_rms, steps, vx, ls, s_px, (delta, n_used) = _bundle_calibration(
             outs_u, homs_u, T, aspect_ratio, n_samples
         )
         cov_unit = np.asarray(cov) / max(s_px, 1e-300) ** 2
+        g_px = math.sqrt(max(delta, 0.0) / max(n_used, 1.0))
+        z_persp = math.sqrt(max(delta, 0.0)) / max(s_px, 1e-300)
+        perspective_ok = bool(z_persp >= PERSPECTIVE_Z and g_px >= PERSPECTIVE_FACTOR * float(outline_error))
     else:
         K, omega, code = linear_calibration(homs_u, method, T, aspect_ratio)
         cov = jnp.full((4, 4), jnp.nan)
@@ -685,7 +780,8 @@ def calibrate(
     assessed = cov_unit is not None and np.all(np.isfinite(K_np)) and K_np[0, 0] > 0 and K_np[1, 1] > 0
     if assessed:
         determined, std, weak, advice = _assess(
-            K_np, cov_unit, s_px, outs_u, np.asarray(vx), np.asarray(ls), free_aspect, used, all_at_infinity
+            K_np, cov_unit, s_px, outs_u, np.asarray(vx), np.asarray(ls), free_aspect, used, all_at_infinity,
+            perspective_ok, image_size,
         )
     if all_at_infinity and (not bool(code == RESULTS.successful) or not assessed or not determined[:2].all()):
         return principal_point_only()
@@ -695,10 +791,21 @@ def calibrate(
             code = RESULTS.only_principal_point if (not determined[:2].any() and determined[2:].all()) else RESULTS.degenerate
             det = ", ".join(f"{n} = {_fmt_std(x, sd)} px" for n, x, sd, d in zip(_NAMES, est, std, determined) if d)
             und = ", ".join(f"{n} ({_fmt_std(x, sd)} px)" for n, x, sd, d in zip(_NAMES, est, std, determined) if not d)
+            why = _implausible(np.array(est), outs_u, image_size)
+            why = f" Not a plausible camera: {why}." if why else ""
+            if not perspective_ok:
+                why += (
+                    f" The outlines show too little perspective to fix the focal length: the best camera with "
+                    f"no perspective fits them only {g_px:.2g} px RMS worse (z = {z_persp:.2g}), which "
+                    + (f"noise alone could do (needs z >= {PERSPECTIVE_Z:g})" if z_persp < PERSPECTIVE_Z else
+                       f"a systematic outline error of {float(outline_error):g} px (outline_error) could do "
+                       f"(needs >= {PERSPECTIVE_FACTOR * float(outline_error):.2g} px)")
+                    + "."
+                )
             details = (
                 f"Not determined by these views: {und}"
                 + (f"; determined: {det}" if det else "")
-                + ". To fix it: " + "; ".join(advice) + "."
+                + "." + why + " To fix it: " + "; ".join(advice) + "."
             )
             mask = np.array([[not determined[0], False, not determined[2]], [False, not determined[1], not determined[3]],
                              [False, False, False]])
@@ -714,6 +821,6 @@ def calibrate(
             K = jnp.full((3, 3), jnp.nan)
     cal = Calibration(
         K, omega, homologies, code, jnp.asarray(cov), jnp.asarray(cost), view_rms, jnp.asarray(steps), jnp.asarray(vx),
-        jnp.asarray(ls), method, a, tuple(used), details, tuple(dropped), tuple(notes),
+        jnp.asarray(ls), method, a, tuple(used), details, tuple(dropped), tuple(notes), float(g_px), float(z_persp),
     )
     return finish(cal)

@@ -126,6 +126,16 @@ def _views_from_images(args):
     return outlines, sources, images, size
 
 
+def _nonnegative(text: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (np.isfinite(x) and x >= 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
+    return x
+
+
 def _calibrate(args) -> int:
     import sorjax
 
@@ -145,7 +155,8 @@ def _calibrate(args) -> int:
     print(f"{len(outlines)} outline(s) from {len(args.outlines)} file(s)")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        cal = sorjax.calibrate(outlines, method=args.method, aspect_ratio=args.aspect_ratio)
+        cal = sorjax.calibrate(outlines, method=args.method, aspect_ratio=args.aspect_ratio,
+                               outline_error=args.outline_error, image_size=size)
     for w in caught:
         print(f"warning: {w.message}", file=sys.stderr)
     used = set(cal.used)
@@ -235,6 +246,10 @@ def main(argv=None) -> int:
                    "one overlay PNG per image)")
     c.add_argument("--method", default="bundle", choices=["bundle", "I", "IIa", "IIb"])
     c.add_argument("--aspect-ratio", type=float, default=None, help="known fu / fv")
+    c.add_argument("--outline-error", type=_nonnegative, default=0.1, metavar="PX",
+                   help="systematic error of the outlines in px that their symmetry does not show "
+                        "(segmentation, lens distortion); the outlines must show 3x this much perspective "
+                        "for the focal length to count as determined (default 0.1; 0 for exact outlines)")
     c.set_defaults(func=_calibrate)
     e = sub.add_parser("experiment", help="run an experiment config (configs/*.toml)")
     e.add_argument("config", help="a TOML config file, or the name of one in configs/ (e.g. table1-quick)")

@@ -178,14 +178,24 @@ def test_near_degenerate_views_warn_with_advice():
     fix the focal length: only the principal point is reported -- never a confident K."""
     sc = posed(NEAR_AXIS)
     with pytest.warns(UserWarning, match=r"weak geometry.*straight at the object's axis.*edge or corner"):
-        cal = sorjax.calibrate(sc.outlines)
+        cal = sorjax.calibrate(sc.outlines, outline_error=0.0)  # exact outlines
     assert cal.success and k_error(cal) < 1e-4
     assert any("weak geometry" in n for n in cal.notes)
+    # the same outlines if they may carry 0.1 px of systematic error (the default): they
+    # show far less perspective than 3 x 0.1 px, so the focal length is not determined
+    assert cal.perspective_px < 0.3
+    real = sorjax.calibrate(sc.outlines)
+    assert not real.success and np.isnan(real.fv)
     for seed in (10, 20):
         outs = [scenes.paper_noise(o, 1.0, seed + i) for i, o in enumerate(sc.outlines)]
-        pp_only = sorjax.calibrate(outs)
-        assert pp_only.result == sorjax.RESULTS.only_principal_point and np.isnan(pp_only.fv)
-        assert np.all(np.abs(pp_only.principal_point - K_TRUE[:2, 2]) < 3 * pp_only.std[2:] + 1.0)
+        for oe in (0.0, 0.1):
+            pp_only = sorjax.calibrate(outs, outline_error=oe)
+            assert not pp_only.success and np.isnan(pp_only.fv)
+            if pp_only.result == sorjax.RESULTS.only_principal_point:
+                assert np.all(np.abs(pp_only.principal_point - K_TRUE[:2, 2]) < 3 * pp_only.std[2:] + 1.0)
+            else:  # too little perspective (the evidence gate): nothing is reported
+                assert pp_only.result == sorjax.RESULTS.degenerate and np.isnan(pp_only.principal_point).all()
+                assert "too little perspective" in pp_only.message
 
 
 def test_weak_geometry_with_noise_is_reported_through_the_covariance():
@@ -195,7 +205,7 @@ def test_weak_geometry_with_noise_is_reported_through_the_covariance():
     sc = posed([(30, 0, 0.3, (370, 290)), (-10, 70, -0.5, (290, 250)), (50, 200, 1.0, (330, 210))])
     outs = [scenes.paper_noise(o, 1.0, 10 + i) for i, o in enumerate(sc.outlines)]
     with pytest.warns(UserWarning, match=r"weak geometry: the focal length is uncertain by .* %.*straight at"):
-        cal = sorjax.calibrate(outs)
+        cal = sorjax.calibrate(outs, outline_error=0.0)  # the synthetic noise is the only error
     assert cal.success and cal.std[1] / K_TRUE[1, 1] > 0.05
     assert abs(cal.fv - K_TRUE[1, 1]) < 3 * cal.std[1]
 
@@ -297,17 +307,26 @@ def test_bad_input_says_what_is_wrong_before_any_tracing(outlines, kwargs, words
 
 
 def test_collapsed_focal_length_is_never_determined():
-    # a focal length of 20 px with a small std (seen on weak real photographs) would put
-    # 300-px outlines across ~170 degrees: refused as undetermined, the principal point kept
-    from sorjax._calibration import _assess
+    # a focal length with a small std that would put the outlines across more than 90
+    # degrees of view (seen on weak real photographs: 20 px, 168 px for a true 590) is
+    # refused as undetermined, and so is the principal point estimated with it
+    from sorjax._calibration import _assess, _implausible
 
     sc = scenes.two_spheres(700.0)
     K = np.array([[20.0, 0, 320.0], [0, 20.0, 240.0], [0, 0, 1]])
     vx = np.stack([v.v_x for v in sc.views])
     ls = np.stack([v.l_s for v in sc.views])
     outs = [sorjax.make_outline(o) for o in sc.outlines]
+    extent = max(np.ptp(np.concatenate(sc.outlines), axis=0))
     determined, std, _, _ = _assess(K, np.eye(4) * 1e-4, 0.5, outs, vx, ls, False)
-    assert not determined[:2].any() and determined[2:].all()
-    K[0, 0] = K[1, 1] = 700.0
-    determined, _, _, _ = _assess(K, np.eye(4) * 1e-4, 0.5, outs, vx, ls, False)
-    assert determined.all()
+    assert not determined.any()
+    assert "deg of view" in _implausible(np.array([20.0, 20.0, 320.0, 240.0]), outs)
+    for f, ok in ((0.45 * extent, False), (0.55 * extent, True), (700.0, True)):
+        K[0, 0] = K[1, 1] = f
+        determined, _, _, _ = _assess(K, np.eye(4) * 1e-4, 0.5, outs, vx, ls, False)
+        assert determined.all() == ok, f
+    # a principal point outside the image, when its size is known
+    K[0, 2] = 700.0
+    assert _assess(K, np.eye(4) * 1e-4, 0.5, outs, vx, ls, False)[0].all()
+    determined, _, _, _ = _assess(K, np.eye(4) * 1e-4, 0.5, outs, vx, ls, False, image_size=(640, 480))
+    assert not determined.any()

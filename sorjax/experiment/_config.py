@@ -50,7 +50,8 @@ Top-level keys
     sigma (px, > 0; sweepable), smooth_px (default 2), preserve_std (default false).
 [fit]
     n_samples (samples per view, default 100 as in the paper), n_points (outline
-    resampling, default 2048).
+    resampling, default 2048), outline_error (px, default 0: synthetic outlines carry
+    only the configured noise, no systematic error; see ``sorjax.calibrate``).
 [bound]
     enabled (bool, default true): for fixed scenes, the first-order error of the
     bundle and the efficiency bound (:func:`sorjax.predicted_error`) per row.
@@ -112,6 +113,7 @@ class NoiseConfig:
 class FitConfig:
     n_samples: int = 100
     n_points: int = 2048
+    outline_error: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -334,7 +336,8 @@ def parse_config(data: dict, name: str = "experiment") -> Config:
     noise = NoiseConfig(**_take(top.pop("noise", {}), "noise", dict(
         model=_str(("paper", "gaussian")), sigma=_sweep(_num(0, lo_open=True)), smooth_px=_num(0),
         preserve_std=_bool)))
-    fit = FitConfig(**_take(top.pop("fit", {}), "fit", dict(n_samples=_int(10, 10000), n_points=_int(64, 1 << 16))))
+    fit = FitConfig(**_take(top.pop("fit", {}), "fit", dict(n_samples=_int(10, 10000), n_points=_int(64, 1 << 16),
+                                                               outline_error=_num(0))))
     bound = _take(top.pop("bound", {}), "bound", dict(enabled=_bool)).get("enabled", True)
     top.setdefault("name", name)
     return Config(scene=scene, noise=noise, fit=fit, bound=bound, **top)

@@ -108,7 +108,8 @@ def run_trial(cfg: Config, row_index: int, row: dict, trial: int) -> dict:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:
-                cal = calibrate(outs, method=method, aspect_ratio=a, homologies=homs, **kw)
+                cal = calibrate(outs, method=method, aspect_ratio=a, homologies=homs,
+                                outline_error=cfg.fit.outline_error, **kw)
             except ValueError as e:
                 rec["methods"][m] = dict(code="error", message=str(e), success=False, gross=True,
                                          time=time.perf_counter() - t0)
