@@ -233,6 +233,7 @@ def calibrate_set(views: list[View], K_true: np.ndarray, set_name: str) -> list[
             method="bundle",
             aspect_ratio=ar,
             homologies=[v.hom for v in usable],
+            image_size=image_size,
         )
         dt = time.perf_counter() - t0
         head = f"{set_name} | bundle, {ar_name} | {len(usable)} views in ({dt:.1f} s)"

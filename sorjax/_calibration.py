@@ -334,6 +334,12 @@ UNDETERMINED = 1.0 / 3.0
 # and to 168 px (nocs-real275, true 590) and 177 px (ycb-video, true 1067) with a std
 # of 13-15 px and the principal point 7 to 20 std off.
 MIN_FOCAL_FRACTION = 0.5
+# With the image size known (``calibrate(image_size=...)``), an estimate is also
+# implausible when it gives the image a field of view above MAX_FOV_DEG across (wider
+# lenses are fisheyes, far from a pinhole without distortion) or puts the principal
+# point outside the image.  (ycb-video, true f 1067 px: f 177 +- 13 px, a 122 deg view
+# of its 640 px width -- caught only by this bound, narrowly.)
+MAX_FOV_DEG = 120.0
 # Weak geometry: warn when the relative standard deviation of a focal length exceeds
 # WEAK_REL_STD, the covariance scaled by the residual but at least RESIDUAL_FLOOR_PX
 # (about the accuracy of good sub-pixel outlines), so that a configuration that only
@@ -467,7 +473,8 @@ def _assess(K, cov_unit, s_px, outs, vx, ls, free_aspect: bool, used=None, floor
     ``max(s_px, RESIDUAL_FLOOR_PX)`` when above ``WEAK_REL_STD``.  Without enough
     evidence for perspective (``perspective_ok`` False), with a collapsed focal length
     (below ``MIN_FOCAL_FRACTION`` of the outlines' extent) or with the principal point
-    outside the image (``image_size = (width, height)``, when given) nothing is
+    outside the image or a field of view above ``MAX_FOV_DEG`` (``image_size = (width,
+    height)``, when given) nothing is
     determined: an estimate that rests on systematic errors of the outlines, not on
     their perspective."""
     K = np.asarray(K)
@@ -511,6 +518,13 @@ def _implausible(est, outs, image_size=None) -> str:
         )
     if image_size is not None:
         w, h = image_size
+        fov = [2.0 * math.degrees(math.atan(n / (2.0 * max(abs(x), 1e-300)))) for n, x in ((w, est[0]), (h, est[1]))]
+        if max(fov) > MAX_FOV_DEG:
+            return (
+                f"the estimate (fu = {est[0]:.0f}, fv = {est[1]:.0f} px) gives the {w}x{h} image a field of view of "
+                f"{fov[0]:.0f} x {fov[1]:.0f} deg, beyond what lenses without distortion reach "
+                f"({MAX_FOV_DEG:g} deg): the outlines' errors, not their perspective, made it"
+            )
         if not (-0.5 <= est[2] <= w - 0.5 and -0.5 <= est[3] <= h - 0.5):
             return (
                 f"the estimated principal point ({est[2]:.0f}, {est[3]:.0f}) lies outside the {w}x{h} image: "
@@ -596,8 +610,9 @@ def calibrate(
             accuracy of good sub-pixel outlines of real objects; pass 0 for exact
             outlines with only random noise (synthetic studies).
         image_size: ``(width, height)`` of the images in px, when known: an estimate
-            with the principal point outside the image is then reported as not
-            determined (it is made by the outlines' errors).
+            with the principal point outside the image, or a field of view above
+            ``MAX_FOV_DEG`` (120 deg), is then reported as not determined (the outlines'
+            errors made it, not their perspective).
         throw: raise :class:`CalibrationError` instead of returning a failed result.
 
     Returns:

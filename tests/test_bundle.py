@@ -118,3 +118,67 @@ def test_losses_import_and_differentiate_in_fresh_session():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().endswith("ok")
+
+
+def _mirror_symmetric_outline(angle_deg, centre):
+    """The orthographic image of a surface of revolution seen side-on: (+-r(y), y),
+    rotated by ``angle_deg`` about the origin and moved to ``centre`` (units of 100 px)."""
+    t = np.linspace(-1.0, 1.0, 300)
+    r = 0.55 + 0.2 * np.cos(2.2 * t) + 0.08 * t
+    right = np.stack([r, t], 1)
+    left = (right * np.array([-1.0, 1.0]))[::-1]
+    u = np.linspace(1.0, -1.0, 100)[1:-1, None]
+    top = np.concatenate([u * r[-1], np.ones_like(u)], 1)
+    bottom = np.concatenate([-u * r[0], -np.ones_like(u)], 1)
+    p = np.concatenate([right, top, left, bottom])
+    c, s = np.cos(np.radians(angle_deg)), np.sin(np.radians(angle_deg))
+    return p @ np.array([[c, s], [-s, c]]) + np.asarray(centre)
+
+
+def test_orthographic_cost_vanishes_only_without_perspective(scene):
+    """The no-perspective reference of the evidence gate (``orthographic_cost``):
+    mirror-symmetric outlines (orthographic views of a surface of revolution) fit it
+    exactly, from axes started 1 degree off; the two-sphere scene's perspective outlines
+    do not (their truth fits exactly, the orthographic camera about 0.75 px RMS worse)."""
+    from sorjax._bundle import make_problem, orthographic_cost
+
+    outs = [_mirror_symmetric_outline(a, c) for a, c in ((10.0, (-1.5, 0.4)), (-35.0, (1.2, -0.3)))]
+    pts = np.stack([np.asarray(sorjax.make_outline(100 * o, 1024).points) for o in outs]) * 0.01
+    prob = make_problem(pts, 100, aspect=1.0)
+    ang = np.radians([10.0, -35.0]) + np.radians(1.0)
+    l0 = np.stack([[np.cos(a), np.sin(a), 0.0] for a in ang])  # near the true axes, 1 deg off
+    l0[:, 2] = -(l0[:, :2] * np.array([[-1.5, 0.4], [1.2, -0.3]])).sum(1)
+    y0 = (intrinsic_params(np.array([[5.0, 0, 0.1], [0, 5.0, -0.2], [0, 0, 1]]), False), axis_params(l0))
+    n = float(jnp.sum(prob.weights))
+    assert float(orthographic_cost(y0, prob)) / n < 1e-3**2 * 1e-4  # (1e-5 units = 1e-3 px)^2
+    assert float(jnp.sum(residuals(y0, prob) ** 2)) / n > 1e-4  # the start is off
+
+    # perspective: the two spheres at f = 700, in units of 100 px
+    T = np.diag([0.01, 0.01, 1.0])
+    pts = np.stack([np.asarray(sorjax.make_outline(o, 1024).points) for o in scene.outlines]) * 0.01
+    prob = make_problem(pts, 100, aspect=None)
+    y = (intrinsic_params(T @ scene.K, True), axis_params(np.stack([np.linalg.solve(T.T, v.l_s) for v in scene.views])))
+    n = float(jnp.sum(prob.weights))
+    at_truth = float(jnp.sum(residuals(y, prob) ** 2)) / n
+    g_px = 100 * np.sqrt(float(orthographic_cost(y, prob)) / n - at_truth)
+    assert at_truth < (1e-3 / 100) ** 2 and 0.4 < g_px < 1.5, (at_truth, g_px)
+
+
+@pytest.mark.filterwarnings("ignore:weak geometry")
+def test_evidence_gate_follows_outline_error():
+    """f = 1400 (weak perspective), 1 px of the paper's noise: the outlines show about
+    0.2 px of perspective.  Taken as exact (outline_error=0) the bundle gives K with a
+    std that covers its error; allowing systematic errors of a third of the evidence
+    or more, the focal length is not determined and the message says why."""
+    sc = scenes.two_spheres(f=1400.0)
+    rng = np.random.default_rng(3)
+    outs = [scenes.paper_noise(o, 1.0, rng) for o in sc.outlines]
+    cal = sorjax.calibrate(outs, outline_error=0.0)
+    g = cal.perspective_px
+    assert cal.success and 0.05 < g < 0.5 and cal.perspective_z > 3
+    assert abs(cal.fv - 1400.0) < 3 * cal.std[1]
+    homs = cal.homologies
+    assert sorjax.calibrate(outs, homologies=homs, outline_error=g / 3.3).success
+    weak = sorjax.calibrate(outs, homologies=homs, outline_error=g / 2.7)
+    assert not weak.success and np.isnan(weak.fv) and "too little perspective" in weak.message
+    assert weak.perspective_px == pytest.approx(g, rel=1e-6)

@@ -330,3 +330,10 @@ def test_collapsed_focal_length_is_never_determined():
     assert _assess(K, np.eye(4) * 1e-4, 0.5, outs, vx, ls, False)[0].all()
     determined, _, _, _ = _assess(K, np.eye(4) * 1e-4, 0.5, outs, vx, ls, False, image_size=(640, 480))
     assert not determined.any()
+    # a field of view above 120 deg across a 640 px image (f < 184.75 px) is no lens
+    # without distortion, whatever the outlines' extent (here 100 px)
+    small = [100 * np.stack([np.cos(t), np.sin(t)], 1) for t in [np.linspace(0, 2 * np.pi, 50)]]
+    for f, bad in ((180.0, True), (190.0, False)):
+        why = _implausible(np.array([f, f, 320.0, 240.0]), small, (640, 480))
+        assert bool(why) == bad and (not bad or "field of view" in why), (f, why)
+        assert not _implausible(np.array([f, f, 320.0, 240.0]), small)
