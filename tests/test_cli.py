@@ -30,6 +30,30 @@ def test_cli_bad_input_is_one_line_and_exit_2(tmp_path):
     assert "sorjax: error:" in r.stderr and ("NaN" in r.stderr or "no such file" in r.stderr)
 
 
+def test_cli_outline_error_option(tmp_path, capsys):
+    """--outline-error reaches calibrate: exact outlines at f = 1400 from near the axis
+    show little perspective; declared exact they calibrate, with 1 px of possible
+    systematic error the focal length is refused (exit 1, the reason printed); a
+    negative value is a usage error (exit 2)."""
+    from sorjax.scenes import pose_at_pixel
+
+    K = scenes.intrinsics(1400.0)
+    prof = scenes.vase()
+    files = []
+    for i, (el, az, px) in enumerate(((15, 0, (380, 270)), (-10, 70, (280, 250)), (30, 200, (330, 200)))):
+        R, t = pose_at_pixel(prof, K, el, az, roll=0.3 * i, pixel=px)
+        o = scenes.sor_scene(prof, K, [(R, t)]).outlines[0]
+        files.append(str(tmp_path / f"v{i}.npy"))
+        np.save(files[-1], o)
+    assert main(["calibrate", *files, "--outline-error", "0"]) == 0
+    capsys.readouterr()
+    assert main(["calibrate", *files, "--outline-error", "1.0"]) == 1
+    assert "too little perspective" in capsys.readouterr().err
+    r = subprocess.run([sys.executable, "-m", "sorjax", "calibrate", *files, "--outline-error", "-1"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "Traceback" not in r.stderr and "outline-error" in r.stderr
+
+
 def _rendered(tmp_path, n_images=2):
     import cv2
 
