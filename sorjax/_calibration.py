@@ -357,10 +357,11 @@ RESIDUAL_FLOOR_PX = 0.1
 # by a cost delta with sqrt(delta / s^2) >= PERSPECTIVE_Z (the noise cannot explain it)
 # and sqrt(delta / n) >= PERSPECTIVE_FACTOR * outline_error px (nor can a systematic
 # error of the outlines of `outline_error` px RMS: a fully aligned one changes the cost
-# by n outline_error^2).  Measured on real photographs (experiments/realdata.py): the
-# sets that gave a confident wrong K showed 0.09 to 0.19 px of perspective
-# (nvlabs-6dof-graspnet: f 271 +- 16 px for a true 616); the two-sphere scene shows
-# 0.7 to 0.8 px at f = 700 and 0.14 to 0.28 px at f = 1400 (1 to 2 px of noise).
+# by n outline_error^2).  Measured: the real photographs of nvlabs-6dof-graspnet
+# (experiments/realdata.py; approximate masks) show 0.20 to 0.22 px of perspective and
+# gave f 271 +- 16 px for a true 616 without this gate; the two-sphere scene shows 0.7
+# to 0.8 px at f = 700 and 0.14 to 0.28 px at f = 1400 (1 to 2 px of noise); rendered
+# objects near the image centre at f = 1250 to 1500 px 0.23 to 0.24 px.
 OUTLINE_ERROR_PX = 0.1
 PERSPECTIVE_Z = 3.0
 PERSPECTIVE_FACTOR = 3.0
@@ -474,9 +475,8 @@ def _assess(K, cov_unit, s_px, outs, vx, ls, free_aspect: bool, used=None, floor
     evidence for perspective (``perspective_ok`` False), with a collapsed focal length
     (below ``MIN_FOCAL_FRACTION`` of the outlines' extent) or with the principal point
     outside the image or a field of view above ``MAX_FOV_DEG`` (``image_size = (width,
-    height)``, when given) nothing is
-    determined: an estimate that rests on systematic errors of the outlines, not on
-    their perspective."""
+    height)``, when given) nothing is determined: such an estimate rests on systematic
+    errors of the outlines, not on their perspective."""
     K = np.asarray(K)
     est = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
     var = np.diag(np.asarray(cov_unit))

@@ -110,3 +110,20 @@ def test_conic_views_are_dropped_with_a_reason(spheres):
     assert not few.success and "Fewer than two views" in few.message and np.isnan(few.fu)
     with pytest.raises(sorjax.CalibrationError), pytest.warns(UserWarning):
         sorjax.calibrate([sc.outlines[0], ellipse], throw=True)
+
+
+@pytest.mark.parametrize(
+    "kw, words",
+    [
+        (dict(outline_error=-0.1), "outline_error must be a finite number of pixels >= 0"),
+        (dict(outline_error=float("nan")), "outline_error"),
+        (dict(outline_error="0.1"), "outline_error"),
+        (dict(image_size=(640,)), r"image_size must be \(width, height\)"),
+        (dict(image_size=(640, -480)), "image_size"),
+        (dict(image_size=(640.5, 480)), "image_size"),
+    ],
+)
+def test_bad_outline_error_and_image_size(spheres, kw, words):
+    sc, homs = spheres
+    with pytest.raises(ValueError, match=words):
+        sorjax.calibrate(sc.outlines, homologies=homs, **kw)
