@@ -97,7 +97,8 @@ class Calibration(eqx.Module):
         notes: every warning :func:`calibrate` issued for this calibration, in order.
         perspective_px: the evidence for perspective in the outlines (bundle only): how
             much worse, in px RMS per sample, the best camera with no perspective
-            (orthographic, every v_x at infinity) fits them.  Only perspective fixes
+            (orthographic, every v_x at infinity) fits them than the bundle's estimate.
+            (Not computed for the linear methods, which give no uncertainty either.)  Only perspective fixes
             the focal length; see ``outline_error`` in :func:`calibrate`.
         perspective_z: the same evidence in units of the symmetry noise,
             ``sqrt(delta cost / s^2)`` (a z-score against "no perspective").
@@ -273,6 +274,16 @@ def _linearised_covariance(outs, homologies, K, T, aspect_ratio, n_samples):
     y = (intrinsic_params(T @ np.asarray(K), aspect_ratio is None), axis_params(_axes_normalised(homologies, T)))
     cov, s2 = covariance(y, problem, jnp.asarray(T))
     return np.asarray(cov) / (max(float(s2), 1e-300) * scale**2)
+
+
+def _perspective(evidence, s_px: float, outline_error: float):
+    """``(ok, g_px, z)``: the evidence for perspective ``(delta_px2, n)`` as an RMS per
+    sample ``g_px`` and a z-score ``sqrt(delta) / s_px``, and whether it passes the gate
+    (``z >= PERSPECTIVE_Z`` and ``g_px >= PERSPECTIVE_FACTOR * outline_error``)."""
+    delta, n = evidence
+    g = math.sqrt(max(delta, 0.0) / max(n, 1.0))
+    z = math.sqrt(max(delta, 0.0)) / max(s_px, 1e-300)
+    return bool(z >= PERSPECTIVE_Z and g >= PERSPECTIVE_FACTOR * float(outline_error)), g, z
 
 
 def _inlier_mask(homologies, n_samples: int) -> np.ndarray:
@@ -774,13 +785,11 @@ def calibrate(
     T = normalising_transform(np.concatenate([np.asarray(o.points) for o in outs_u]))
     perspective_ok, g_px, z_persp = True, math.nan, math.nan
     if method == "bundle":
-        K, omega, code, cov, cost, view_rms, steps, vx, ls, s_px, (delta, n_used) = _bundle_calibration(
+        K, omega, code, cov, cost, view_rms, steps, vx, ls, s_px, evidence = _bundle_calibration(
             outs_u, homs_u, T, aspect_ratio, n_samples
         )
         cov_unit = np.asarray(cov) / max(s_px, 1e-300) ** 2
-        g_px = math.sqrt(max(delta, 0.0) / max(n_used, 1.0))
-        z_persp = math.sqrt(max(delta, 0.0)) / max(s_px, 1e-300)
-        perspective_ok = bool(z_persp >= PERSPECTIVE_Z and g_px >= PERSPECTIVE_FACTOR * float(outline_error))
+        perspective_ok, g_px, z_persp = _perspective(evidence, s_px, outline_error)
     else:
         K, omega, code = linear_calibration(homs_u, method, T, aspect_ratio)
         cov = jnp.full((4, 4), jnp.nan)
