@@ -97,9 +97,9 @@ class Calibration(eqx.Module):
         notes: every warning :func:`calibrate` issued for this calibration, in order.
         perspective_px: the evidence for perspective in the outlines (bundle only): how
             much worse, in px RMS per sample, the best camera with no perspective
-            (orthographic, every v_x at infinity) fits them than the bundle's estimate.
-            (Not computed for the linear methods, which give no uncertainty either.)  Only perspective fixes
-            the focal length; see ``outline_error`` in :func:`calibrate`.
+            (orthographic, every v_x at infinity) fits them than the bundle's estimate
+            (NaN for the linear methods, which give no uncertainty either).  Only
+            perspective fixes the focal length; see ``outline_error`` in :func:`calibrate`.
         perspective_z: the same evidence in units of the symmetry noise,
             ``sqrt(delta cost / s^2)`` (a z-score against "no perspective").
     """
