@@ -133,6 +133,9 @@ def solve(y0, problem: BundleProblem, max_steps: int = 200):
 # e^9.2 ~ 1e4, a field of view of about 0.01 degree), so that every v_x is at
 # infinity and each outline's symmetry is an affine (skew) reflection.
 ORTHO_LOG_F = 9.2
+# only the cost is needed, to about 1e-4 (the evidence agreed to 5 digits with the
+# bundle's tolerances on the two-sphere scene; 2.7 ms instead of 4.1 ms a call)
+_ORTHO_SOLVER = optx.LevenbergMarquardt(rtol=1e-4, atol=1e-6)
 
 
 @functools.partial(jax.jit, static_argnames=("max_steps",))
@@ -160,7 +163,7 @@ def orthographic_cost(y, problem: BundleProblem, max_steps: int = 100):
         return residuals((k, a), problem)
 
     z0 = (k0[0] - k0[1], a0) if free else a0
-    sol = optx.least_squares(res, _SOLVER, z0, max_steps=max_steps, throw=False)
+    sol = optx.least_squares(res, _ORTHO_SOLVER, z0, max_steps=max_steps, throw=False)
     return jnp.sum(res(sol.value, None) ** 2)
 
 
