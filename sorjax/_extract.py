@@ -371,6 +371,13 @@ def _describe(p: np.ndarray, area: float) -> str:
     return f"area {area:.0f} px^2, x {x0:.0f}..{x1:.0f}, y {y0:.0f}..{y1:.0f}"
 
 
+BINARY_SMOOTH = 2.0
+
+
+def _is_binary(F) -> bool:
+    return bool(np.all((F == 0.0) | (F == 1.0)))
+
+
 def _outlines_from_field(F, *, min_area, smooth, border, what="mask", names=None):
     """Outer 0.5-level outlines of the field F (H, W) in [0, 1]; see outlines_from_mask."""
     H, W = F.shape
@@ -394,7 +401,7 @@ def _outlines_from_field(F, *, min_area, smooth, border, what="mask", names=None
         )
     # variance of the blur that moved the level set, and the arc-length scale on which
     # curvature is measured (binary masks: a noisier staircase, a longer scale)
-    binary = bool(np.all((F == 0.0) | (F == 1.0)))
+    binary = _is_binary(F)
     variance = smooth**2 + (0.0 if binary else 1.0 / 12.0)  # a soft mask is box-filtered
     out, refused = [], []
     for k, (a, p) in enumerate(big):
@@ -429,7 +436,7 @@ def outlines_from_mask(
     *,
     label=None,
     min_area: float = 100.0,
-    smooth: float = 1.0,
+    smooth: float | None = None,
     border: str = "refuse",
 ) -> list[np.ndarray]:
     """Sub-pixel outlines of the objects of a mask, largest first.
@@ -447,15 +454,17 @@ def outlines_from_mask(
         ``mask == label``.
     min_area : float
         Objects enclosing less than this many pixels^2 are ignored (specks).
-    smooth : float
+    smooth : float, optional
         Standard deviation, in pixels, of the Gaussian applied to the mask before the 0.5
-        level set is traced (0: none).  About 1 px removes most of the staircase of
-        binary masks; the blur moves a curved edge by ``~smooth^2 / (2 R)`` px towards
-        its centre of curvature (``R`` the radius of curvature in px), which is undone
-        from the traced curve's own curvature, and rounds sharp corners over about
-        ``2 smooth`` px.  Measured on renders of known geometry (RMS distance to the
-        exact silhouette): about 0.02 px from anti-aliased (coverage) masks, 0.15 px from
-        binary masks, against 0.53 px for ``cv2.findContours``.
+        level set is traced (0: none).  The blur moves a curved edge by
+        ``~smooth^2 / (2 R)`` px towards its centre of curvature (``R`` the radius of
+        curvature in px), which is undone from the traced curve's own curvature, and
+        rounds sharp corners over about ``2 smooth`` px.  Default: ``BINARY_SMOOTH``
+        (2 px) for binary masks, whose staircase it averages out, and 1 px for soft
+        masks.  Measured on renders of known geometry (RMS distance to the exact
+        silhouette): about 0.02 px from anti-aliased (coverage) masks; from binary masks
+        0.18, 0.16, 0.13, 0.12, 0.12 px for a blur of 0.7, 1, 1.5, 2, 2.5 px; against
+        0.53 px for ``cv2.findContours``.
     border : {"refuse", "cut", "raise"}
         What to do with an object whose outline comes within 1 px of the image border
         (it may continue outside the image, so its outline is not its silhouette):
@@ -478,8 +487,10 @@ def outlines_from_mask(
         Wrong shape or dtype, values out of range, a label that does not occur, no object
         (or none of ``min_area``), or every object refused at the border.
     """
-    min_area, smooth = _check_options(min_area, smooth, border)
     F = _as_field(mask, label)
+    if smooth is None:
+        smooth = BINARY_SMOOTH if _is_binary(F) else 1.0
+    min_area, smooth = _check_options(min_area, smooth, border)
     return _outlines_from_field(F, min_area=min_area, smooth=smooth, border=border)
 
 
