@@ -15,7 +15,8 @@ checks are:
     image of the axis and the largest distance (px) between the two lines over the
     object's extent along the axis.  Target: within 0.5 degree for true SORs with
     ground-truth masks.
-(b) per set: ``sorjax.calibrate`` (bundle, unit aspect ratio and free) on all the views
+(b) per set: ``sorjax.calibrate`` (bundle, unit aspect ratio and free; the default
+    ``outline_error`` of 0.1 px and the images' size as ``image_size``) on all the views
     that gave an outline: views used and dropped (with sorjax's reasons), K, std, error
     against the dataset K in px and in units of std, and the verdict: "K within 3 std",
     "not determined" (sorjax says so), or "CONFIDENT WRONG K" (success with an error
