@@ -371,7 +371,13 @@ def _describe(p: np.ndarray, area: float) -> str:
     return f"area {area:.0f} px^2, x {x0:.0f}..{x1:.0f}, y {y0:.0f}..{y1:.0f}"
 
 
-BINARY_SMOOTH = 2.0
+# The default blur of binary masks.  2 px gives better outlines on renders (0.122 px
+# RMS against 0.156 at 1 px), but on the approximate GrabCut masks of
+# nvlabs-6dof-graspnet it lowered a tin's symmetry residual from 2.2 to just under the
+# 2 px at which a view is dropped as not symmetric; kept, that view showed 0.96 px of
+# "perspective" and the bundle returned f = 306 +- 19 px for a true 616.  Until the
+# calibration tells systematic outline errors from perspective, 1 px.
+BINARY_SMOOTH = 1.0
 
 
 def _is_binary(F) -> bool:
@@ -460,11 +466,14 @@ def outlines_from_mask(
         ``~smooth^2 / (2 R)`` px towards its centre of curvature (``R`` the radius of
         curvature in px), which is undone from the traced curve's own curvature, and
         rounds sharp corners over about ``2 smooth`` px.  Default: ``BINARY_SMOOTH``
-        (2 px) for binary masks, whose staircase it averages out, and 1 px for soft
+        (1 px) for binary masks, whose staircase it averages out, and 1 px for soft
         masks.  Measured on renders of known geometry (RMS distance to the exact
         silhouette): about 0.02 px from anti-aliased (coverage) masks; from binary masks
         0.18, 0.16, 0.13, 0.12, 0.12 px for a blur of 0.7, 1, 1.5, 2, 2.5 px; against
-        0.53 px for ``cv2.findContours``.
+        0.53 px for ``cv2.findContours``.  (2 px would be better on renders, but on the
+        approximate real masks of nvlabs-6dof-graspnet it made a tin's outline just
+        symmetric enough to be kept, and that view drove a confident wrong K: see
+        ``BINARY_SMOOTH``.)
     border : {"refuse", "cut", "raise"}
         What to do with an object whose outline comes within 1 px of the image border
         (it may continue outside the image, so its outline is not its silhouette):
