@@ -14,7 +14,9 @@ def write_camera(cal, path, image_size: tuple[int, int], sources=()) -> tuple[Pa
     """Write ``cal`` to ``path`` (OpenCV FileStorage YAML: ``camera_matrix``,
     ``image_width``, ``image_height``, ``intrinsics_std`` = std of (fu, fv, u0, v0)
     in px, ``distortion_coefficients`` = zeros (not estimated), ``method``) and to
-    the same path with suffix ``.json``.  Returns both paths."""
+    the same path with suffix ``.json`` (also the per-view symmetry RMS and the
+    evidence for perspective, ``perspective_px`` / ``perspective_z``; null when not
+    computed).  Returns both paths."""
     import cv2
 
     path = Path(path)
@@ -43,8 +45,15 @@ def write_camera(cal, path, image_size: tuple[int, int], sources=()) -> tuple[Pa
         views=[dict(source=str(src), used=i in cal.used) for i, src in enumerate(sources)],
         dropped=[dict(view=int(i), reason=r) for i, r in getattr(cal, "dropped", ())],
         view_rms_px=[float(x) for x in np.asarray(cal.view_rms)],
+        perspective_px=_finite_or_none(getattr(cal, "perspective_px", float("nan"))),
+        perspective_z=_finite_or_none(getattr(cal, "perspective_z", float("nan"))),
     ), indent=1))
     return path, twin
+
+
+def _finite_or_none(x):
+    x = float(x)
+    return x if np.isfinite(x) else None
 
 
 def clip_line(l, w, h):

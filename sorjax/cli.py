@@ -188,6 +188,9 @@ def _calibrate(args) -> int:
         print(f"  {n} = {v:10.3f} px" + (f"  +- {s:.3f}" if np.isfinite(s) else ""))
     print("K =")
     print(np.array2string(np.asarray(cal.K), precision=3, suppress_small=True))
+    if np.isfinite(cal.perspective_px):
+        print(f"perspective shown by the outlines: {cal.perspective_px:.3g} px RMS (z = {cal.perspective_z:.3g}; "
+              f"the focal length needs >= {3 * args.outline_error:.3g} px, 3 x --outline-error)")
     if args.out is not None:
         if size is None:
             pts = np.concatenate([np.asarray(o).reshape(-1, 2) for o in outlines])

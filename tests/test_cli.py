@@ -97,6 +97,9 @@ def test_cli_calibrates_from_images_and_masks_writes_yaml(tmp_path, capsys):
     js = json.loads(out.with_suffix(".json").read_text())
     np.testing.assert_allclose(js["camera_matrix"], Kr)
     assert len(js["views"]) == 4
+    # the evidence for perspective, printed and in the twin: above the gate's 0.3 px
+    assert js["perspective_px"] > 0.3 and js["perspective_z"] > 3
+    assert f"perspective shown by the outlines: {js['perspective_px']:.3g} px" in text
     for s in ("img0", "img1"):
         png = out.parent / f"camera_overlay_{s}.png"
         assert cv2.imread(str(png)).shape == (480, 640, 3)
