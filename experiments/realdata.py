@@ -52,7 +52,6 @@ SETS = (
     "linemod",
 )
 AXIS_TARGET_DEG = 0.5
-DATA_ROOT = [DEFAULT_DATA]  # the data folder in use (set by main)
 
 
 @dataclass
@@ -67,6 +66,7 @@ class View:
     hom: object = None
     error: str = ""
     cut: bool = False
+    size: tuple[int, int] | None = None  # (width, height) of the photograph, px
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -113,6 +113,7 @@ def collect_views(root: Path, set_name: str, box_margin: int) -> tuple[list[View
                 o["sor"],
                 kind if (label_img is not None and "mask_id" in o) else "image+box",
                 gt_line=None if gt is None else np.asarray(gt["image_line_abc"], float),
+                size=(w, h),
             )
             views.append(v)
             if v.source == "image+box":
@@ -220,12 +221,7 @@ def calibrate_set(views: list[View], K_true: np.ndarray, set_name: str) -> list[
         )
         return lines
     truth = np.array([K_true[0, 0], K_true[1, 1], K_true[0, 2], K_true[1, 2]])
-    image_size = None
-    for v in usable:
-        img = cv2.imread(str(DATA_ROOT[0] / v.set / v.image), cv2.IMREAD_UNCHANGED)
-        if img is not None:
-            image_size = (img.shape[1], img.shape[0])
-            break
+    image_size = usable[0].size  # one camera per set: one image size
     for ar, ar_name in ((1.0, "aspect 1"), (None, "aspect free")):
         t0 = time.perf_counter()
         res, ws = recorded(
@@ -306,7 +302,6 @@ def main(argv=None) -> int:
         )
         return 2
     t_start = time.perf_counter()
-    DATA_ROOT[0] = args.data
     all_views: dict[str, list[View]] = {}
     metas = {}
     for s in args.sets.split(","):

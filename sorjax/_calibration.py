@@ -254,13 +254,13 @@ def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples):
                                            inliers=_inlier_mask(homologies, n_samples))
     cov, s2 = covariance(y, problem, jnp.asarray(T))
     K, omega, vx, ls = solution_in_pixels(y, problem, jnp.asarray(T))
-    delta = (float(orthographic_cost(y, problem)) - float(jnp.sum(r**2))) * scale**2
-    evidence = (delta, float(jnp.sum(problem.weights)))
     ok = bool(res == optx.RESULTS.successful) and bool(np.all(np.isfinite(np.asarray(K))))
     code = RESULTS.successful if ok else RESULTS.not_converged
     rv = np.asarray(r).reshape(len(outs), -1) * scale
     view_rms = jnp.asarray(np.sqrt(np.mean(rv**2, axis=1)))
-    cost = jnp.asarray(np.sum(rv**2))
+    cost = float(np.sum(rv**2))
+    evidence = (float(orthographic_cost(y, problem)) * scale**2 - cost, float(jnp.sum(problem.weights)))
+    cost = jnp.asarray(cost)
     return K, omega, code, cov, cost, view_rms, steps, vx, ls, float(np.sqrt(s2)) * scale, evidence
 
 

@@ -371,15 +371,6 @@ def _describe(p: np.ndarray, area: float) -> str:
     return f"area {area:.0f} px^2, x {x0:.0f}..{x1:.0f}, y {y0:.0f}..{y1:.0f}"
 
 
-# The default blur of binary masks.  2 px gives better outlines on renders (0.122 px
-# RMS against 0.156 at 1 px), but on the approximate GrabCut masks of
-# nvlabs-6dof-graspnet it lowered a tin's symmetry residual from 2.2 to just under the
-# 2 px at which a view is dropped as not symmetric; kept, that view showed 0.96 px of
-# "perspective" and the bundle returned f = 306 +- 19 px for a true 616.  Until the
-# calibration tells systematic outline errors from perspective, 1 px.
-BINARY_SMOOTH = 1.0
-
-
 def _is_binary(F) -> bool:
     return bool(np.all((F == 0.0) | (F == 1.0)))
 
@@ -442,7 +433,7 @@ def outlines_from_mask(
     *,
     label=None,
     min_area: float = 100.0,
-    smooth: float | None = None,
+    smooth: float = 1.0,
     border: str = "refuse",
 ) -> list[np.ndarray]:
     """Sub-pixel outlines of the objects of a mask, largest first.
@@ -460,20 +451,19 @@ def outlines_from_mask(
         ``mask == label``.
     min_area : float
         Objects enclosing less than this many pixels^2 are ignored (specks).
-    smooth : float, optional
+    smooth : float
         Standard deviation, in pixels, of the Gaussian applied to the mask before the 0.5
-        level set is traced (0: none).  The blur moves a curved edge by
-        ``~smooth^2 / (2 R)`` px towards its centre of curvature (``R`` the radius of
-        curvature in px), which is undone from the traced curve's own curvature, and
-        rounds sharp corners over about ``2 smooth`` px.  Default: ``BINARY_SMOOTH``
-        (1 px) for binary masks, whose staircase it averages out, and 1 px for soft
-        masks.  Measured on renders of known geometry (RMS distance to the exact
+        level set is traced (0: none); it averages out the staircase of binary masks.
+        The blur moves a curved edge by ``~smooth^2 / (2 R)`` px towards its centre of
+        curvature (``R`` the radius of curvature in px), which is undone from the traced
+        curve's own curvature, and rounds sharp corners over about ``2 smooth`` px.
+        Measured on renders of known geometry (RMS distance to the exact
         silhouette): about 0.02 px from anti-aliased (coverage) masks; from binary masks
         0.18, 0.16, 0.13, 0.12, 0.12 px for a blur of 0.7, 1, 1.5, 2, 2.5 px; against
         0.53 px for ``cv2.findContours``.  (2 px would be better on renders, but on the
-        approximate real masks of nvlabs-6dof-graspnet it made a tin's outline just
-        symmetric enough to be kept, and that view drove a confident wrong K: see
-        ``BINARY_SMOOTH``.)
+        approximate GrabCut masks of nvlabs-6dof-graspnet it lowered a tin's symmetry
+        residual from 2.2 to just under the 2 px at which a view is dropped; kept, that
+        view drove the bundle to f = 306 +- 19 px for a true 616.  Hence 1 px.)
     border : {"refuse", "cut", "raise"}
         What to do with an object whose outline comes within 1 px of the image border
         (it may continue outside the image, so its outline is not its silhouette):
@@ -496,10 +486,8 @@ def outlines_from_mask(
         Wrong shape or dtype, values out of range, a label that does not occur, no object
         (or none of ``min_area``), or every object refused at the border.
     """
-    F = _as_field(mask, label)
-    if smooth is None:
-        smooth = BINARY_SMOOTH if _is_binary(F) else 1.0
     min_area, smooth = _check_options(min_area, smooth, border)
+    F = _as_field(mask, label)
     return _outlines_from_field(F, min_area=min_area, smooth=smooth, border=border)
 
 
