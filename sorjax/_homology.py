@@ -46,6 +46,7 @@ import cv2
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import lineax as lx
 import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
@@ -308,7 +309,9 @@ def _residuals(p, args):
 # steps), Levenberg-Marquardt when Gauss-Newton fails or ends above its start.
 _SOLVERS = {
     "lm": optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10),
-    "gn": optx.GaussNewton(rtol=1e-10, atol=1e-10),
+    # truncated SVD: no step along (near-)null directions, e.g. the family of exact
+    # homologies of a nearly conic outline, where a plain Gauss-Newton step can jump
+    "gn": optx.GaussNewton(rtol=1e-10, atol=1e-10, linear_solver=lx.SVD(rcond=1e-6)),
     "screen": optx.LevenbergMarquardt(rtol=1e-4, atol=1e-6),
 }
 COARSE_STEPS = 15
