@@ -319,8 +319,9 @@ _PROBLEM_CACHE_SIZE = 4
 def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max_steps: int = 200, inliers=None):
     """Screen every intrinsic seed (``SCREEN_STEPS`` loose Levenberg-Marquardt steps),
     polish the one of lowest cost to convergence (Gauss-Newton; Levenberg-Marquardt
-    when that fails or ends above its start); should that not converge either (a flat,
-    slightly rough valley: seen once in 1400 Table 1 trials), the next seed, and so on.
+    when that fails or ends above its start, accepted at its step limit when it is as good
+    as stationary: :data:`STATIONARY_SIGMAS`); should that not converge either, the
+    next seed, and so on.
 
     Args:
         points_n: (V, M, 2) outlines in normalised coordinates.
@@ -359,6 +360,8 @@ def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max
             y, res, steps, r = solve(y if improved else y0, problem, max_steps=max_steps, method="lm")
             total += int(steps)
             cost = float(jnp.sum(r**2))
+            if np.isfinite(cost) and float(step_sigmas(y, problem)) < STATIONARY_SIGMAS:
+                res = optx.RESULTS.successful  # stopped by the step limit, but as good as stationary
         ok = bool(res == optx.RESULTS.successful) and np.isfinite(cost)
         key = (not ok, cost if np.isfinite(cost) else np.inf)
         if best is None or key < best[0]:
@@ -366,8 +369,6 @@ def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max
         if ok:
             break
     _, y, res, r = best
-    if best[0][0] and np.isfinite(best[0][1]) and float(step_sigmas(y, problem)) < STATIONARY_SIGMAS:
-        res = optx.RESULTS.successful  # stopped by the step limit, but as good as stationary
     return y, res, total, r, problem
 
 

@@ -224,9 +224,10 @@ def linear_calibration(homologies, method: str, T: np.ndarray, aspect_ratio=None
 
 def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples):
     """Seed the 2V+4 (or 2V+3) bundle with every linear method that succeeds (IIa,
-    IIb and I; with a known aspect ratio their estimates are projected onto it) and
-    keep the solution of lowest cost: one linear seed can be far off when a view is
-    weak.  With no positive-definite linear seed, a spread of plausible cameras.
+    IIb and I; with a known aspect ratio their estimates are projected onto it): one
+    linear seed can be far off when a view is weak, so :func:`fit_bundle` screens
+    them all and polishes the best.  With no positive-definite linear seed, a spread
+    of plausible cameras.
 
     Returns ``(K, omega, code, cov, cost, view_rms, steps, v_x, l_s, s_px, evidence)``;
     ``K`` is the raw estimate (not yet masked on failure), ``s_px`` the residual
