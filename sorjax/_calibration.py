@@ -471,7 +471,10 @@ def _ls_intersection(ls: np.ndarray):
 
 
 def _fmt_std(x, sd):
-    return f"{x:.1f} +- {sd:.2g}" if np.isfinite(sd) else f"{x:.1f} +- inf"
+    """``x +- sd`` in px: one decimal, or 3 significant digits beyond 1e6 px (a focal
+    length that ran off towards the no-perspective limit)."""
+    xs = f"{x:.1f}" if abs(x) < 1e6 else f"{x:.3g}"
+    return f"{xs} +- {sd:.2g}" if np.isfinite(sd) else f"{xs} +- inf"
 
 
 def _assess(K, cov_unit, s_px, outs, vx, ls, free_aspect: bool, used=None, floor_verdict: bool = False,
