@@ -49,7 +49,6 @@ import functools
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
@@ -58,6 +57,7 @@ from ._camera import intrinsics_matrix, omega_matrix, omega_vector_from_intrinsi
 from ._camera import pixel_intrinsics as _pixel_intrinsics
 from ._field import DistanceField, closest_parameter, curve_points, make_field, sample_weights
 from ._homology import homology_matrix, symmetry_residuals, transfer
+from ._solvers import Solved, polish, solvers
 
 
 class BundleProblem(eqx.Module):
@@ -121,26 +121,15 @@ def residuals(y, problem: BundleProblem) -> Float[Array, " VN"]:
     return r.reshape(-1)
 
 
-# Solvers.  Every seed is first screened with a few loose Levenberg-Marquardt steps;
-# the best one is then polished by Gauss-Newton (full steps: near a minimum of this
-# small-residual problem it needs about half of Levenberg-Marquardt's steps, whose
-# damping decays slowly), with Levenberg-Marquardt as the fallback when Gauss-Newton
-# fails or ends above its start.  Measured on the two-sphere scene (40 trials each,
-# unit aspect): f = 700, sigma 1 px, 38 -> 25 ms a calibration, the same estimates
-# (to 1e-6 % of f); f = 1400, sigma 2 px, 68-100 -> 25 ms, 7 gross failures instead
-# of 10 (polishing only the best screened seed no longer lets a losing seed crawl to
-# its step limit).  Screening with 8, 4 or 2 steps gave the same focal RMS and gross
-# failures over 60 trials (f = 700 sigma 1, f = 1400 sigma 2, both aspect models);
-# 4 steps: 3-4 ms faster than 8.
-_SOLVERS = {
-    "lm": optx.LevenbergMarquardt(rtol=1e-7, atol=1e-9),
-    # truncated SVD: no step along a direction whose singular value is below 1e-6 of
-    # the largest (the covariance's NULL_EIGENVALUE, squared): a plain QR step let fv
-    # drift from 800 to 1025 px along the null direction of a degenerate view set
-    # (level camera, upright objects, free aspect), where the damped LM step does not
-    "gn": optx.GaussNewton(rtol=1e-7, atol=1e-9, linear_solver=lx.SVD(rcond=1e-6)),
-    "screen": optx.LevenbergMarquardt(rtol=1e-4, atol=1e-6),
-}
+# Solvers (:mod:`sorjax._solvers`): every seed is screened by SCREEN_STEPS loose
+# Levenberg-Marquardt steps, the best polished by Gauss-Newton.  Measured on the
+# two-sphere scene (40 trials each, unit aspect) against full Levenberg-Marquardt from
+# every seed: f = 700, sigma 1 px, 38 -> 25 ms a calibration, the same estimates (to
+# 1e-6 % of f); f = 1400, sigma 2 px, 68-100 -> 25 ms, 7 gross failures instead of 10
+# (a losing seed no longer crawls to its step limit).  Screening with 8, 4 or 2 steps
+# gave the same focal RMS and gross failures over 60 trials (f = 700 sigma 1, f = 1400
+# sigma 2, both aspect models); 4 steps: 3-4 ms faster than 8.
+_SOLVERS = solvers(rtol=1e-7, atol=1e-9)
 SCREEN_STEPS = 4
 
 
@@ -349,19 +338,17 @@ def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max
         screened.append((cost if np.isfinite(cost) else np.inf, len(screened), y))
     screened.sort(key=lambda c: c[:2])
     best = None
+    def run(y, method):
+        out = solve(y, problem, max_steps=max_steps, method=method)
+        return Solved(out[0], bool(out[1] == optx.RESULTS.successful), float(jnp.sum(out[3] ** 2)), int(out[2]), out)
+
     for cost0, _, y0 in screened:  # the best screened seed first; the others only if it fails
-        y, res, steps, r = solve(y0, problem, max_steps=max_steps, method="gn")
-        total += int(steps)
-        cost = float(jnp.sum(r**2))
-        improved = np.isfinite(cost) and cost <= cost0 * (1 + 1e-12)
-        if not (bool(res == optx.RESULTS.successful) and improved):
-            # Gauss-Newton can cycle in a flat valley (free aspect, weak views): finish
-            # with Levenberg-Marquardt from the better of its end and its start
-            y, res, steps, r = solve(y if improved else y0, problem, max_steps=max_steps, method="lm")
-            total += int(steps)
-            cost = float(jnp.sum(r**2))
-            if np.isfinite(cost) and float(step_sigmas(y, problem)) < STATIONARY_SIGMAS:
-                res = optx.RESULTS.successful  # stopped by the step limit, but as good as stationary
+        final, steps = polish(run, y0, cost0)
+        total += steps
+        y, res, _, r = final.out
+        cost = final.cost
+        if not final.ok and np.isfinite(cost) and float(step_sigmas(y, problem)) < STATIONARY_SIGMAS:
+            res = optx.RESULTS.successful  # stopped by the step limit, but as good as stationary
         ok = bool(res == optx.RESULTS.successful) and np.isfinite(cost)
         key = (not ok, cost if np.isfinite(cost) else np.inf)
         if best is None or key < best[0]:

@@ -46,7 +46,6 @@ import cv2
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
@@ -54,6 +53,7 @@ from jaxtyping import Array, Bool, Float, Int
 from ._camera import normalising_transform, transform_points
 from ._field import DistanceField, curve_points, make_field, sample_weights, signed_distances
 from ._outline import DEFAULT_POINTS, make_outline, perimeter
+from ._solvers import Solved, polish, solvers
 
 DEFAULT_SAMPLES = 100
 INFINITY_Z = 3.0
@@ -304,16 +304,9 @@ def _residuals(p, args):
     return jnp.concatenate([r, _BARRIER_GAIN * jax.nn.relu(_BARRIER_AT - a)[None]])
 
 
-# Screening: a few loose Levenberg-Marquardt steps from every start; polishing: Gauss-
-# Newton from the best (near the minimum it needs about half of Levenberg-Marquardt's
-# steps), Levenberg-Marquardt when Gauss-Newton fails or ends above its start.
-_SOLVERS = {
-    "lm": optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10),
-    # truncated SVD: no step along (near-)null directions, e.g. the family of exact
-    # homologies of a nearly conic outline, where a plain Gauss-Newton step can jump
-    "gn": optx.GaussNewton(rtol=1e-10, atol=1e-10, linear_solver=lx.SVD(rcond=1e-6)),
-    "screen": optx.LevenbergMarquardt(rtol=1e-4, atol=1e-6),
-}
+# Screening (COARSE_STEPS loose Levenberg-Marquardt steps from every start), then
+# polishing: see :mod:`sorjax._solvers`.
+_SOLVERS = solvers(rtol=1e-10, atol=1e-10)
 COARSE_STEPS = 15
 
 
@@ -356,12 +349,14 @@ def _refine_candidates(field, samples, weights, cands, max_steps: int = 100):
     if best is None:
         raise FloatingPointError("every start of the homology fit gave a non-finite cost")
     cost0, out0, (_, v0, E) = best
-    out = _refine_jit(field, samples, weights, out0[5], v0, E, max_steps=max_steps, method="gn")
-    steps = out0[4] + out[4]
-    if not (bool(out[3]) and np.isfinite(float(out[2])) and float(out[2]) <= cost0 * (1 + 1e-12)):
-        out = _refine_jit(field, samples, weights, out0[5], v0, E, max_steps=max_steps, method="lm")
-        steps = steps + out[4]
-    return out[0], out[1], float(out[2]), out[3], steps, out[6]
+
+    def run(p, method):
+        out = _refine_jit(field, samples, weights, p, v0, E, max_steps=max_steps, method=method)
+        return Solved(out[5], bool(out[3]), float(out[2]), int(out[4]), out)
+
+    final, steps = polish(run, out0[5], cost0)
+    out = final.out
+    return out[0], out[1], float(out[2]), out[3], int(out0[4]) + steps, out[6]
 
 
 TRIM_K = 4.0  # robust standard deviations

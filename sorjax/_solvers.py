@@ -1,0 +1,62 @@
+"""Least-squares solvers shared by the per-view fit (eq. 20) and the bundle.
+
+Both minimise a sum of squared distances from a few starting points, in two stages:
+
+* **screen** every start with a few loose Levenberg-Marquardt steps and keep the one of
+  lowest cost (a start far from the minimum needs the damping);
+* **polish** that one to convergence by Gauss-Newton (full steps: near a minimum of
+  these small-residual problems it takes about half of Levenberg-Marquardt's steps,
+  whose damping decays slowly), and by Levenberg-Marquardt where Gauss-Newton fails or
+  ends above its start (:func:`polish`).
+
+The Gauss-Newton step is a truncated-SVD least-squares solve: it never moves along a
+direction whose singular value is below ``NULL_RCOND`` of the largest, i.e. one the data
+do not determine (``NULL_RCOND^2`` is the bundle covariance's null eigenvalue
+threshold).  With a plain QR step, a degenerate view set (a level camera and upright
+objects, free aspect ratio) let fv drift from 800 to 1025 px along its null direction,
+where the damped Levenberg-Marquardt step stays put.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable, NamedTuple
+
+import lineax as lx
+import numpy as np
+import optimistix as optx
+
+NULL_RCOND = 1e-6
+SCREEN = optx.LevenbergMarquardt(rtol=1e-4, atol=1e-6)
+
+
+def solvers(rtol: float, atol: float) -> dict[str, Any]:
+    """The three optimistix solvers by name: "lm" (Levenberg-Marquardt), "gn"
+    (Gauss-Newton, truncated SVD) with tolerances ``rtol, atol``, and "screen"."""
+    return {
+        "lm": optx.LevenbergMarquardt(rtol=rtol, atol=atol),
+        "gn": optx.GaussNewton(rtol=rtol, atol=atol, linear_solver=lx.SVD(rcond=NULL_RCOND)),
+        "screen": SCREEN,
+    }
+
+
+class Solved(NamedTuple):
+    """One solve's outcome as :func:`polish` needs it; ``out`` is the caller's own."""
+
+    y: Any
+    ok: bool
+    cost: float
+    steps: int
+    out: Any
+
+
+def polish(run: Callable[[Any, str], Solved], y0, cost0: float) -> tuple[Solved, int]:
+    """Gauss-Newton from ``y0`` (of cost ``cost0``); when it does not converge or ends
+    above ``cost0``, Levenberg-Marquardt from the better of its end and ``y0`` (Gauss-
+    Newton can cycle in a flat valley).  ``run(y, method)`` solves from ``y``.  Returns
+    the final :class:`Solved` and the steps of both."""
+    gn = run(y0, "gn")
+    improved = bool(np.isfinite(gn.cost) and gn.cost <= cost0 * (1 + 1e-12))
+    if gn.ok and improved:
+        return gn, gn.steps
+    lm = run(gn.y if improved else y0, "lm")
+    return lm, gn.steps + lm.steps
