@@ -337,11 +337,12 @@ def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max
         cost = float(jnp.sum(r**2))
         screened.append((cost if np.isfinite(cost) else np.inf, len(screened), y))
     screened.sort(key=lambda c: c[:2])
-    best = None
+
     def run(y, method):
         out = solve(y, problem, max_steps=max_steps, method=method)
         return Solved(out[0], bool(out[1] == optx.RESULTS.successful), float(jnp.sum(out[3] ** 2)), int(out[2]), out)
 
+    best = None
     for cost0, _, y0 in screened:  # the best screened seed first; the others only if it fails
         final, steps = polish(run, y0, cost0)
         total += steps
