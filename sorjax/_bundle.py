@@ -57,7 +57,7 @@ from ._camera import intrinsics_matrix, omega_matrix, omega_vector_from_intrinsi
 from ._camera import pixel_intrinsics as _pixel_intrinsics
 from ._field import DistanceField, closest_parameter, curve_points, make_field, sample_weights
 from ._homology import homology_matrix, symmetry_residuals, transfer
-from ._solvers import Solved, polish, solvers
+from ._solvers import NULL_RCOND, Solved, polish, solvers
 
 
 class BundleProblem(eqx.Module):
@@ -195,7 +195,7 @@ def solution_in_pixels(y, problem: BundleProblem, T):
             ls / jnp.linalg.norm(ls[:, :2], axis=1, keepdims=True))
 
 
-NULL_EIGENVALUE = 1e-12
+NULL_EIGENVALUE = NULL_RCOND**2  # 1e-12: the Gauss-Newton polish takes no step where this calls null
 
 
 @jax.jit
