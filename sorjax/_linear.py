@@ -25,7 +25,8 @@ Method I (eqs. 21-23, zero skew and unit aspect).  ``l_x = (l2 v3, -l1 v3,
 l1 v2 - l2 v1)`` is the line through ``v`` orthogonal to ``l``; the principal point is
 the least-squares intersection of the ``l_x`` (each scaled to ``a^2 + b^2 = 1``), and
 ``f = mean_i sqrt(dist(x0_i, v_i) dist(x0_i, l_i))`` with ``x0_i`` the principal
-point projected onto ``l_x,i``.  A known aspect ratio ``a = fu/fv`` is handled by
+point projected onto ``l_x,i`` (by default a mean weighted by each view's sensitivity
+to the principal point, see :func:`method_i`).  A known aspect ratio ``a = fu/fv`` is handled by
 eqs. 24-26: map ``v -> diag(1/a, 1, 1) v`` and ``l -> diag(a, 1, 1) l``, solve, then
 ``u0 = a u0'``, ``fu = a f``, ``fv = f`` (do that mapping in pixels, before
 normalising).  Views whose ``v`` is at infinity (``|v3| ~ 0``) give no ``l_x`` and
@@ -83,9 +84,21 @@ def method_ii(v, l, *, unit_aspect: bool, weights=None):
     return fu, fv, u0, v0, ok, w
 
 
-@jax.jit
-def method_i(v, l, *, finite_tol: float = 1e-9):
+@functools.partial(jax.jit, static_argnames=("weighted",))
+def method_i(v, l, *, finite_tol: float = 1e-9, weighted: bool = True):
     """Method I (unit aspect ratio, zero skew).
+
+    ``weighted=False`` is eq. 23 as printed, the plain mean of the per-view
+    ``f_i = sqrt(d_v d_l)`` (``d_v = dist(x0_i, v_i)``, ``d_l = dist(x0_i, l_i)``,
+    ``d_v d_l = f_i^2``).  ``weighted=True`` (default) weighs each ``f_i`` by
+    ``1 / (1 + s_i^2)`` with ``s_i = |d_v - d_l| / (2 f_i)``, the derivative of ``f_i``
+    with respect to the principal point moving along ``l_x`` (eq. 22's error reaches
+    every ``f_i`` that way).  For an ordinary view ``s_i`` is below about 1 and the
+    weights are nearly equal; for a view whose ``v_x`` lies thousands of focal lengths
+    away (the optical axis nearly in the plane through the revolution axis) ``d_l`` is a
+    fraction of a pixel and ``s_i ~ d_v / 2f`` is huge: a principal point 1e-4 px off
+    moved such a view's ``f_i`` by a percent, and the plain mean with it.  Both agree
+    exactly on exact homologies.
 
     Returns ``(f, f, u0, v0, ok)`` in the coordinates of ``v, l``.  ``ok`` is False when
     fewer than two views have a finite vertex or their lines ``l_x`` are parallel."""
@@ -110,7 +123,10 @@ def method_i(v, l, *, finite_tol: float = 1e-9):
     dv = jnp.linalg.norm(x0i - vin, axis=-1)
     dl = jnp.abs(jnp.sum(x0i * l[:, :2], -1) + l[:, 2]) / jnp.linalg.norm(l[:, :2], axis=-1)
     fi = jnp.sqrt(dv * dl)
-    f = jnp.sum(jnp.where(wgt > 0, fi, 0.0)) / jnp.maximum(jnp.sum(wgt), 1.0)
+    if weighted:
+        sens = jnp.abs(dv - dl) / (2.0 * jnp.maximum(fi, 1e-300))
+        wgt = wgt / (1.0 + jnp.where(wgt > 0, sens, 0.0) ** 2)
+    f = jnp.sum(jnp.where(wgt > 0, fi, 0.0) * wgt) / jnp.maximum(jnp.sum(wgt), 1e-300)
     f = jnp.where(ok, f, jnp.nan)
     return f, f, x0[0], x0[1], ok
 

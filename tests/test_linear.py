@@ -59,6 +59,35 @@ def test_unit_aspect_methods_exact(seed):
         np.testing.assert_allclose(K_from(T, *est[:4]), K, atol=1e-7 * f)
 
 
+def test_method_i_weighting_tames_a_view_with_a_far_vertex():
+    """A view whose v_x lies ~5000 f away (the optical axis 0.01 deg from the plane
+    through the revolution axis) has d(x0, l_s) of a fraction of a pixel: a principal
+    point 0.01 px off moves its f_i = sqrt(d_v d_l) by percents.  Eq. 23's plain mean
+    inherits that; the sensitivity-weighted mean does not.  Both are exact on exact
+    homologies."""
+    f = 800.0
+    K = np.array([[f, 0, 330.0], [0, f, 250.0], [0, 0, 1.0]])
+    # normals of the planes through each revolution axis and the camera centre:
+    # three ordinary views (v_x about 1.4 f away) and one with the optical axis
+    # within 0.01 deg of its plane
+    n = np.array([[1.0, 0.0, 0.7], [np.cos(2.0), np.sin(2.0), 0.7], [np.cos(4.0), np.sin(4.0), 0.7], [1.0, 0.3, 2e-4]])
+    v, l = n @ K.T, np.linalg.solve(K.T, n.T).T
+    assert np.linalg.norm(v[3, :2] / v[3, 2] - K[:2, 2]) > 1000 * f
+    T, vn, ln = normalised(K, v, l)
+    for weighted in (True, False):
+        est = method_i(vn, ln, weighted=weighted)
+        np.testing.assert_allclose(K_from(T, *est[:4]), K, atol=1e-6 * f)
+    # move view 0's vertex by 0.02 px across its l_x: the principal point moves
+    vp = v.copy()
+    vp[0, :2] += 0.02 * vp[0, 2] * np.array([-l[0, 1], l[0, 0]]) / np.linalg.norm(l[0, :2])
+    T, vn, ln = normalised(K, vp, l)
+    err = {}
+    for weighted in (True, False):
+        err[weighted] = abs(K_from(T, *method_i(vn, ln, weighted=weighted)[:4])[0, 0] - f) / f * 100
+    assert err[True] < 0.01, err
+    assert err[False] > 10 * err[True], err
+
+
 def test_rows_are_the_papers_eqs_27_28():
     """Our rank-safe rows span the same constraints as eqs. 27-28."""
     rng = np.random.default_rng(3)
