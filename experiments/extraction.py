@@ -110,10 +110,10 @@ def part_a(args, rng):
     print()
 
 
-def cameras(n, rng, size=(640, 480)):
+def cameras(n, rng, size=(640, 480), f_range=(500.0, 1500.0)):
     w, h = size
     out = []
-    for k, f in enumerate(np.linspace(500.0, 1500.0, n)):
+    for k, f in enumerate(np.linspace(f_range[0], f_range[1], n)):
         a = rng.uniform(0.95, 1.05)
         pp = (0.5 * w + rng.uniform(-0.08, 0.08) * w, 0.5 * h + rng.uniform(-0.08, 0.08) * h)
         out.append(S.intrinsics(float(f), aspect_ratio=float(a), principal_point=pp))
@@ -128,7 +128,7 @@ def part_b(args, rng):
     errs = {s: [] for s in sources}
     rows = []
     t0 = time.time()
-    for ci, K in enumerate(cameras(args.cameras, rng)):
+    for ci, K in enumerate(cameras(args.cameras, rng, f_range=args.f_range)):
         renders = []
         seed = int(rng.integers(2**31))
         while len(renders) < args.images:
@@ -219,6 +219,8 @@ def main(argv=None):
     ap.add_argument("--cameras", type=int, default=5)
     ap.add_argument("--images", type=int, default=3, help="images per camera")
     ap.add_argument("--objects", type=int, default=3, help="objects per image")
+    ap.add_argument("--f-range", type=float, nargs=2, default=(500.0, 1500.0), metavar=("F_MIN", "F_MAX"),
+                    help="focal lengths of the cameras of part (b), evenly spread (px; 640x480 images)")
     ap.add_argument("--views-per-shape", type=int, default=8)
     ap.add_argument("--noise", type=float, default=2.0, help="sensor noise, grey levels")
     ap.add_argument("--blur", type=float, default=0.0, help="point-spread function sigma, px")

@@ -32,7 +32,7 @@ never degenerates (``v^T l = l^T omega^-1 l > 0``).
 
 optimistix with Jacobians by autodiff: every seed (the linear methods' estimates with
 the per-view fits' axes, or a safe spread of cameras when no linear omega is positive
-definite) is screened by a few Levenberg-Marquardt steps, the best is polished by
+definite) is ranked by its cost, the best is polished by
 Gauss-Newton (Levenberg-Marquardt as the fallback; see :func:`fit_bundle`).
 
 Uncertainty: at the optimum, ``Cov(y) = s^2 (J^T J)^-1`` with ``s^2 = |r|^2 / (VN - p)``,
@@ -121,7 +121,7 @@ def residuals(y, problem: BundleProblem) -> Float[Array, " VN"]:
     return r.reshape(-1)
 
 
-# Solvers (:mod:`sorjax._solvers`): every seed is screened by SCREEN_STEPS loose
+# Solvers (:mod:`sorjax._solvers`): every seed was screened by SCREEN_STEPS loose
 # Levenberg-Marquardt steps, the best polished by Gauss-Newton.  Measured on the
 # two-sphere scene (40 trials each, unit aspect) against full Levenberg-Marquardt from
 # every seed: f = 700, sigma 1 px, 38 -> 25 ms a calibration, the same estimates (to
@@ -129,8 +129,21 @@ def residuals(y, problem: BundleProblem) -> Float[Array, " VN"]:
 # (a losing seed no longer crawls to its step limit).  Screening with 8, 4 or 2 steps
 # gave the same focal RMS and gross failures over 60 trials (f = 700 sigma 1, f = 1400
 # sigma 2, both aspect models); 4 steps: 3-4 ms faster than 8.
+#
+# Ranking the seeds by their cost as they are, with no screening step, measured against
+# 4 screening steps (two-sphere scene, 30 trials each, free / unit aspect focal RMS):
+# f = 700 sigma 1: 2.60 / 2.49 % both ways (unit: 2.485 vs 2.494); f = 1400 sigma 1.2:
+# 7.30 / 7.56 vs 7.30 / 7.58 %; f = 1400 sigma 2: 11.20 / 11.71 vs 11.32 / 11.87 %, the same
+# gross failures (2 / 2) -- a few trials polish a different seed into an equally good
+# neighbour -- and 12 solver steps fewer a calibration: SCREEN_STEPS = 0.
 _SOLVERS = solvers(rtol=1e-7, atol=1e-9)
-SCREEN_STEPS = 4
+SCREEN_STEPS = 0
+
+
+@jax.jit
+def _costs(ys, problem: BundleProblem):
+    """The cost of each of a stack of parameters ``ys`` (leading axis: the seeds)."""
+    return jax.vmap(lambda y: jnp.sum(residuals(y, problem) ** 2))(ys)
 
 
 @functools.partial(jax.jit, static_argnames=("max_steps", "method"))
@@ -306,8 +319,8 @@ _PROBLEM_CACHE_SIZE = 4
 
 
 def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max_steps: int = 200, inliers=None):
-    """Screen every intrinsic seed (``SCREEN_STEPS`` loose Levenberg-Marquardt steps),
-    polish the one of lowest cost to convergence (Gauss-Newton; Levenberg-Marquardt
+    """Rank the intrinsic seeds by their cost (after ``SCREEN_STEPS`` loose
+    Levenberg-Marquardt steps when that is above 0), polish the one of lowest cost to convergence (Gauss-Newton; Levenberg-Marquardt
     when that fails or ends above its start, accepted at its step limit when it is as good
     as stationary: :data:`STATIONARY_SIGMAS`); should that not converge either, the
     next seed, and so on.
@@ -328,14 +341,15 @@ def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max
     starts = [(pack_intrinsics(fu, fv, u0, v0_, aspect is None), a0) for fu, fv, u0, v0_ in intrinsic_seeds]
     total = 0
     screened = []
-    for y0 in starts:
-        if len(starts) > 1:
+    if len(starts) > 1 and SCREEN_STEPS > 0:
+        for y0 in starts:
             y, _, steps, r = solve(y0, problem, max_steps=SCREEN_STEPS, method="screen")
             total += int(steps)
-        else:
-            y, r = y0, residuals(y0, problem)
-        cost = float(jnp.sum(r**2))
-        screened.append((cost if np.isfinite(cost) else np.inf, len(screened), y))
+            cost = float(jnp.sum(r**2))
+            screened.append((cost if np.isfinite(cost) else np.inf, len(screened), y))
+    else:
+        costs = np.asarray(_costs(jax.tree_util.tree_map(lambda *a: jnp.stack(a), *starts), problem))
+        screened = [(c if np.isfinite(c) else np.inf, i, y0) for i, (c, y0) in enumerate(zip(costs, starts))]
     screened.sort(key=lambda c: c[:2])
 
     def run(y, method):
