@@ -121,7 +121,7 @@ def residuals(y, problem: BundleProblem) -> Float[Array, " VN"]:
     return r.reshape(-1)
 
 
-# Solvers (:mod:`sorjax._solvers`): every seed was screened by SCREEN_STEPS loose
+# Solvers (:mod:`sorjax._solvers`): every seed was once screened by a few loose
 # Levenberg-Marquardt steps, the best polished by Gauss-Newton.  Measured on the
 # two-sphere scene (40 trials each, unit aspect) against full Levenberg-Marquardt from
 # every seed: f = 700, sigma 1 px, 38 -> 25 ms a calibration, the same estimates (to
@@ -135,9 +135,8 @@ def residuals(y, problem: BundleProblem) -> Float[Array, " VN"]:
 # f = 700 sigma 1: 2.60 / 2.49 % both ways (unit: 2.485 vs 2.494); f = 1400 sigma 1.2:
 # 7.30 / 7.56 vs 7.30 / 7.58 %; f = 1400 sigma 2: 11.20 / 11.71 vs 11.32 / 11.87 %, the same
 # gross failures (2 / 2) -- a few trials polish a different seed into an equally good
-# neighbour -- and 12 solver steps fewer a calibration: SCREEN_STEPS = 0.
+# neighbour -- and 12 solver steps fewer a calibration: no screening steps any more.
 _SOLVERS = solvers(rtol=1e-7, atol=1e-9)
-SCREEN_STEPS = 0
 
 
 @jax.jit
@@ -319,11 +318,10 @@ _PROBLEM_CACHE_SIZE = 4
 
 
 def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max_steps: int = 200, inliers=None):
-    """Rank the intrinsic seeds by their cost (after ``SCREEN_STEPS`` loose
-    Levenberg-Marquardt steps when that is above 0), polish the one of lowest cost to convergence (Gauss-Newton; Levenberg-Marquardt
-    when that fails or ends above its start, accepted at its step limit when it is as good
-    as stationary: :data:`STATIONARY_SIGMAS`); should that not converge either, the
-    next seed, and so on.
+    """Rank the intrinsic seeds by their cost, polish the one of lowest cost to
+    convergence (Gauss-Newton; Levenberg-Marquardt when that fails or ends above its
+    start, accepted at its step limit when it is as good as stationary:
+    :data:`STATIONARY_SIGMAS`); should that not converge either, the next seed, and so on.
 
     Args:
         points_n: (V, M, 2) outlines in normalised coordinates.
@@ -333,31 +331,22 @@ def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max
         inliers: optional (V, N) 0/1 mask of the samples to use (the per-view robust
             fits' ``Homology.inliers``); it multiplies the corner weights.
 
-    Returns ``(y, result, steps, residuals, problem)``; ``steps`` counts every step
-    taken, screening included.
+    Returns ``(y, result, steps, residuals, problem)``; ``steps`` counts every solver
+    step taken.
     """
     problem = make_problem(points_n, n_samples, aspect, inliers)
     a0 = axis_params(l_seeds_n)
     starts = [(pack_intrinsics(fu, fv, u0, v0_, aspect is None), a0) for fu, fv, u0, v0_ in intrinsic_seeds]
     total = 0
-    screened = []
-    if len(starts) > 1 and SCREEN_STEPS > 0:
-        for y0 in starts:
-            y, _, steps, r = solve(y0, problem, max_steps=SCREEN_STEPS, method="screen")
-            total += int(steps)
-            cost = float(jnp.sum(r**2))
-            screened.append((cost if np.isfinite(cost) else np.inf, len(screened), y))
-    else:
-        costs = np.asarray(_costs(jax.tree_util.tree_map(lambda *a: jnp.stack(a), *starts), problem))
-        screened = [(c if np.isfinite(c) else np.inf, i, y0) for i, (c, y0) in enumerate(zip(costs, starts))]
-    screened.sort(key=lambda c: c[:2])
+    costs = np.asarray(_costs(jax.tree_util.tree_map(lambda *a: jnp.stack(a), *starts), problem))
+    ranked = sorted((c if np.isfinite(c) else np.inf, i, y0) for i, (c, y0) in enumerate(zip(costs, starts)))
 
     def run(y, method):
         out = solve(y, problem, max_steps=max_steps, method=method)
         return Solved(out[0], bool(out[1] == optx.RESULTS.successful), float(jnp.sum(out[3] ** 2)), int(out[2]), out)
 
     best = None
-    for cost0, _, y0 in screened:  # the best screened seed first; the others only if it fails
+    for cost0, _, y0 in ranked:  # the best seed first; the others only if it fails
         final, steps = polish(run, y0, cost0)
         total += steps
         y, res, _, r = final.out
