@@ -317,6 +317,9 @@ _PROBLEMS: collections.OrderedDict = collections.OrderedDict()
 _PROBLEM_CACHE_SIZE = 4
 
 
+SEED_BATCH = 3  # the linear methods give at most three seeds; the fallback spread three
+
+
 def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max_steps: int = 200, inliers=None):
     """Rank the intrinsic seeds by their cost, polish the one of lowest cost to
     convergence (Gauss-Newton; Levenberg-Marquardt when that fails or ends above its
@@ -338,7 +341,9 @@ def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max
     a0 = axis_params(l_seeds_n)
     starts = [(pack_intrinsics(fu, fv, u0, v0_, aspect is None), a0) for fu, fv, u0, v0_ in intrinsic_seeds]
     total = 0
-    costs = np.asarray(_costs(jax.tree_util.tree_map(lambda *a: jnp.stack(a), *starts), problem))
+    # one compiled ranking for any number of seeds: padded to a multiple of SEED_BATCH
+    padded = starts + [starts[0]] * (-len(starts) % SEED_BATCH)
+    costs = np.asarray(_costs(jax.tree_util.tree_map(lambda *a: jnp.stack(a), *padded), problem))[: len(starts)]
     ranked = sorted((c if np.isfinite(c) else np.inf, i, y0) for i, (c, y0) in enumerate(zip(costs, starts)))
 
     def run(y, method):
