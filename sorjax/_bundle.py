@@ -74,11 +74,28 @@ class BundleProblem(eqx.Module):
 def unpack_intrinsics(k, aspect):
     """``(fu, fv, u0, v0)`` (normalised units) from the intrinsic parameters ``k``:
     4 entries ``(log fu, log fv, u0, v0)``, or 3 ``(log fv, u0, v0)`` with
-    ``fu = aspect * fv``."""
+    ``fu = aspect * fv``.
+
+    With 4 entries and a known ``aspect`` (not NaN), ``fu = aspect * fv`` and ``k[0]``
+    is ignored: the bundle's solvers use this padded chart for both aspect models, so
+    that each is compiled once (the ignored entry has a zero Jacobian column, which the
+    Gauss-Newton step's truncated SVD, the damped Levenberg-Marquardt step and the
+    covariance's null-space test all leave alone; see :func:`n_params`)."""
     if k.shape[-1] == 4:
-        return jnp.exp(k[0]), jnp.exp(k[1]), k[2], k[3]
+        fv = jnp.exp(k[1])
+        known = jnp.isfinite(aspect)
+        a = jnp.where(known, aspect, 1.0)  # no NaN in the unused branch (its gradient)
+        return jnp.where(known, a * fv, jnp.exp(k[0])), fv, k[2], k[3]
     fv = jnp.exp(k[0])
     return aspect * fv, fv, k[1], k[2]
+
+
+def n_params(y, problem) -> Float[Array, ""]:
+    """The number of free parameters in ``y``: its size, less the ignored ``k[0]`` of
+    the padded chart when the aspect ratio is known (:func:`unpack_intrinsics`)."""
+    size = sum(x.size for x in jax.tree_util.tree_leaves(y))
+    padded = y[0].shape[-1] == 4
+    return size - (jnp.isfinite(problem.aspect).astype(jnp.float64) if padded else 0.0)
 
 
 def pack_intrinsics(fu, fv, u0, v0, free_aspect: bool):
@@ -177,18 +194,17 @@ def orthographic_cost(y, problem: BundleProblem, max_steps: int = 100):
     focal length is not determined, whatever the bundle's covariance says (that
     linearisation can be confident far from the truth under weak perspective)."""
     k0, a0 = y
-    free = k0.shape[0] == 4
     logf = jnp.asarray(ORTHO_LOG_F, k0.dtype)
+    if k0.shape[0] == 3:  # known aspect, compact chart: pad it
+        k0 = jnp.concatenate([k0[:1], k0])
+    free = jnp.isnan(problem.aspect).astype(k0.dtype)  # known aspect: d is ignored
 
-    def res(z, args):
-        if free:  # z = (log(fu / fv), axes)
-            d, a = z
-            k = jnp.concatenate([jnp.stack([logf + d / 2, logf - d / 2]), k0[2:]])
-        else:  # z = axes
-            a, k = z, jnp.concatenate([logf[None], k0[1:]])
+    def res(z, args):  # z = (d = log(fu / fv), axes)
+        d, a = z
+        k = jnp.concatenate([jnp.stack([logf + d / 2, logf - free * d / 2]), k0[2:]])
         return residuals((k, a), problem)
 
-    z0 = (k0[0] - k0[1], a0) if free else a0
+    z0 = (k0[0] - k0[1], a0)
     sol = optx.least_squares(res, _ORTHO_SOLVER, z0, max_steps=max_steps, throw=False)
     return jnp.sum(res(sol.value, None) ** 2)
 
@@ -229,7 +245,7 @@ def covariance(y, problem: BundleProblem, T):
     J = jax.jacfwd(lambda f: residuals(unravel(f), problem))(flat)
     r = residuals(y, problem)
     nk = y[0].shape[0]
-    dof = jnp.maximum(jnp.sum(problem.weights) - flat.shape[0], 1)
+    dof = jnp.maximum(jnp.sum(problem.weights) - n_params(y, problem), 1)
     s2 = jnp.sum(r**2) / dof
     Jk, Ja = J[:, :nk], J[:, nk:]
     # the intrinsics' columns with the per-view parameters' directions projected out
@@ -339,7 +355,8 @@ def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max
     """
     problem = make_problem(points_n, n_samples, aspect, inliers)
     a0 = axis_params(l_seeds_n)
-    starts = [(pack_intrinsics(fu, fv, u0, v0_, aspect is None), a0) for fu, fv, u0, v0_ in intrinsic_seeds]
+    # the padded chart for both aspect models (one compilation each solver)
+    starts = [(pack_intrinsics(fu, fv, u0, v0_, True), a0) for fu, fv, u0, v0_ in intrinsic_seeds]
     total = 0
     # one compiled ranking for any number of seeds: padded to a multiple of SEED_BATCH
     padded = starts + [starts[0]] * (-len(starts) % SEED_BATCH)
@@ -386,7 +403,7 @@ def step_sigmas(y, problem: BundleProblem):
     r = residuals(y, problem)
     g = J.T @ r
     dec2 = g @ jnp.linalg.pinv(J.T @ J, hermitian=True) @ g
-    dof = jnp.maximum(jnp.sum(problem.weights) - flat.shape[0], 1)
+    dof = jnp.maximum(jnp.sum(problem.weights) - n_params(y, problem), 1)
     return jnp.sqrt(jnp.maximum(dec2, 0.0) / jnp.maximum(jnp.sum(r**2) / dof, 1e-300))
 
 

@@ -272,7 +272,8 @@ def _linearised_covariance(outs, homologies, K, T, aspect_ratio, n_samples):
     determine the intrinsics whatever the estimator (infinite where they don't)."""
     scale = 1.0 / T[0, 0]
     problem = make_problem(_normalised_points(outs, T), n_samples, aspect_ratio, _inlier_mask(homologies, n_samples))
-    y = (intrinsic_params(T @ np.asarray(K), aspect_ratio is None), axis_params(_axes_normalised(homologies, T)))
+    # the padded chart (sorjax._bundle.unpack_intrinsics): the bundle's compiled covariance
+    y = (intrinsic_params(T @ np.asarray(K), True), axis_params(_axes_normalised(homologies, T)))
     cov, s2 = covariance(y, problem, jnp.asarray(T))
     return np.asarray(cov) / (max(float(s2), 1e-300) * scale**2)
 
