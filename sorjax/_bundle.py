@@ -229,7 +229,8 @@ NULL_EIGENVALUE = NULL_RCOND**2  # 1e-12: the Gauss-Newton polish takes no step 
 @jax.jit
 def covariance(y, problem: BundleProblem, T):
     """Covariance of the pixel intrinsics ``(fu, fv, u0, v0)`` at ``y``; returns
-    ``(cov, s2)`` with ``s2 = |r|^2 / (VN - p)`` (normalised units^2).
+    ``(cov, s2, step)`` with ``s2 = |r|^2 / (VN - p)`` (normalised units^2) and ``step``
+    the Gauss-Newton step's Mahalanobis length (:func:`step_sigmas`).
 
     The intrinsics' block of ``s^2 (J^T J)^-1`` is taken through the Schur complement
     ``F = J_k^T J_k - J_k^T J_a (J_a^T J_a)^-1 J_a^T J_k`` (the information on the
@@ -257,6 +258,9 @@ def covariance(y, problem: BundleProblem, T):
     meat = _correlated_meat(G, r, y, problem, s2)
     cov_k = F_inv @ meat @ F_inv
 
+    g = J.T @ r  # the Gauss-Newton step's length in standard deviations (step_sigmas)
+    step = jnp.sqrt(jnp.maximum(g @ jnp.linalg.pinv(J.T @ J, hermitian=True) @ g, 0.0) / jnp.maximum(s2, 1e-300))
+
     Gk = jax.jacfwd(lambda k: _pixel_intrinsics(T, *unpack_intrinsics(k, problem.aspect)))(y[0])
     cov = Gk @ cov_k @ Gk.T
     GU = Gk @ U  # (4, nk): each pixel intrinsic along each eigenvector
@@ -265,7 +269,7 @@ def covariance(y, problem: BundleProblem, T):
     bad = undetermined[:, None] | undetermined[None, :]
     cov = jnp.where(bad, jnp.nan, cov)
     cov = jnp.where(jnp.eye(4, dtype=bool) & bad, jnp.inf, cov)
-    return cov, s2
+    return cov, s2, step
 
 
 def _correlated_meat(G, r, y, problem: BundleProblem, s2):
@@ -394,17 +398,11 @@ def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max
 STATIONARY_SIGMAS = 0.01
 
 
-@jax.jit
 def step_sigmas(y, problem: BundleProblem):
     """Mahalanobis length of the Gauss-Newton step at ``y``:
-    ``sqrt(r^T J (J^T J)^+ J^T r) / s`` with ``s^2 = |r|^2 / (n - p)``."""
-    flat, unravel = jax.flatten_util.ravel_pytree(y)
-    J = jax.jacfwd(lambda f: residuals(unravel(f), problem))(flat)
-    r = residuals(y, problem)
-    g = J.T @ r
-    dec2 = g @ jnp.linalg.pinv(J.T @ J, hermitian=True) @ g
-    dof = jnp.maximum(jnp.sum(problem.weights) - n_params(y, problem), 1)
-    return jnp.sqrt(jnp.maximum(dec2, 0.0) / jnp.maximum(jnp.sum(r**2) / dof, 1e-300))
+    ``sqrt(r^T J (J^T J)^+ J^T r) / s`` with ``s^2 = |r|^2 / (n - p)`` (a by-product of
+    :func:`covariance`, so that no separate program is compiled for this rare test)."""
+    return covariance(y, problem, jnp.eye(3))[2]
 
 
 @functools.partial(jax.jit, static_argnames=("n_samples",))

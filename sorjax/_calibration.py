@@ -253,7 +253,7 @@ def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples):
     l_n = _axes_normalised(homologies, T)
     y, res, steps, r, problem = fit_bundle(pts_n, l_n, seeds, aspect_ratio, n_samples,
                                            inliers=_inlier_mask(homologies, n_samples))
-    cov, s2 = covariance(y, problem, jnp.asarray(T))
+    cov, s2, _ = covariance(y, problem, jnp.asarray(T))
     K, omega, vx, ls = solution_in_pixels(y, problem, jnp.asarray(T))
     ok = bool(res == optx.RESULTS.successful) and bool(np.all(np.isfinite(np.asarray(K))))
     code = RESULTS.successful if ok else RESULTS.not_converged
@@ -274,7 +274,7 @@ def _linearised_covariance(outs, homologies, K, T, aspect_ratio, n_samples):
     problem = make_problem(_normalised_points(outs, T), n_samples, aspect_ratio, _inlier_mask(homologies, n_samples))
     # the padded chart (sorjax._bundle.unpack_intrinsics): the bundle's compiled covariance
     y = (intrinsic_params(T @ np.asarray(K), True), axis_params(_axes_normalised(homologies, T)))
-    cov, s2 = covariance(y, problem, jnp.asarray(T))
+    cov, s2, _ = covariance(y, problem, jnp.asarray(T))
     return np.asarray(cov) / (max(float(s2), 1e-300) * scale**2)
 
 

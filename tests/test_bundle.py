@@ -93,6 +93,33 @@ def test_polish_methods_agree_and_the_remaining_step_vanishes(scene):
     assert float(step_sigmas(off, prob)) > 1.0
 
 
+def test_padded_chart_equals_the_compact_chart_for_a_known_aspect(scene):
+    """With a known aspect ratio the solvers use the padded chart (log fu, log fv, u0,
+    v0) whose first entry is ignored, so both aspect models share compiled programs.
+    It must give what the compact chart (log fv, u0, v0) gives: the same residuals
+    whatever the ignored entry holds, the same optimum, the same pixel covariance and
+    degrees of freedom (p = 2V + 3, not 2V + 4)."""
+    from sorjax._bundle import covariance, n_params
+
+    outs = [scenes.paper_noise(o, 1.0, 70 + i) for i, o in enumerate(scene.outlines)]
+    prob, (k4, a0) = problem_at_truth(scene, outs)
+    prob = BundleProblem(prob.fields, prob.samples, prob.weights, jnp.asarray(1.0))
+    k4 = k4 + jnp.asarray([0.0, 0.02, 1.0, -1.0])  # start a little off the truth
+    k3 = k4[1:]
+    r3 = residuals((k3, a0), prob)
+    for junk in (0.0, 3.0, -7.0):
+        np.testing.assert_array_equal(np.asarray(residuals((k4.at[0].set(junk), a0), prob)), np.asarray(r3))
+    assert float(n_params((k4, a0), prob)) == float(n_params((k3, a0), prob)) == 3 + 2 * 3
+    s4, s3 = solve((k4, a0), prob, method="gn"), solve((k3, a0), prob, method="gn")
+    np.testing.assert_allclose(np.asarray(s4[0][0][1:]), np.asarray(s3[0][0]), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(s4[0][1]), np.asarray(s3[0][1]), rtol=1e-9, atol=1e-9)
+    c4, c3 = covariance(s4[0], prob, jnp.eye(3)), covariance(s3[0], prob, jnp.eye(3))
+    assert np.all(np.isfinite(np.asarray(c4[0])))
+    np.testing.assert_allclose(np.asarray(c4[0]), np.asarray(c3[0]), rtol=1e-6)
+    np.testing.assert_allclose(float(c4[1]), float(c3[1]), rtol=1e-12)
+    np.testing.assert_allclose(float(c4[0][0, 0]), float(c4[0][1, 1]), rtol=1e-9)  # fu = fv exactly
+
+
 def test_problem_cache_is_exact():
     """make_problem keeps the last problems, keyed by the inputs' exact bytes: the same
     inputs give the same object, any change (a point by 1e-12, the aspect ratio, the
