@@ -104,7 +104,7 @@ def pack_intrinsics(fu, fv, u0, v0, free_aspect: bool):
     fu, fv, u0, v0 = (float(x) for x in (fu, fv, u0, v0))
     with np.errstate(invalid="ignore", divide="ignore"):
         k = [np.log(fu), np.log(fv), u0, v0] if free_aspect else [np.log(fv), u0, v0]
-    return jnp.asarray(np.array(k))
+    return np.array(k)  # numpy: jitted functions take it without an eager device_put
 
 
 def intrinsic_params(Kn, free_aspect: bool):
@@ -118,7 +118,7 @@ def axis_params(l) -> Float[Array, "V 2"]:
     ``l ~ (cos theta, sin theta, -rho)``."""
     l = np.asarray(l, dtype=np.float64)
     l = l / np.linalg.norm(l[:, :2], axis=1, keepdims=True)
-    return jnp.asarray(np.stack([np.arctan2(l[:, 1], l[:, 0]), -l[:, 2]], axis=1))
+    return np.stack([np.arctan2(l[:, 1], l[:, 0]), -l[:, 2]], axis=1)
 
 
 def pole_polar_pairs(y, problem: BundleProblem):
@@ -364,7 +364,7 @@ def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max
     total = 0
     # one compiled ranking for any number of seeds: padded to a multiple of SEED_BATCH
     padded = starts + [starts[0]] * (-len(starts) % SEED_BATCH)
-    costs = np.asarray(_costs(jax.tree_util.tree_map(lambda *a: jnp.stack(a), *padded), problem))[: len(starts)]
+    costs = np.asarray(_costs(jax.tree_util.tree_map(lambda *a: np.stack(a), *padded), problem))[: len(starts)]
     ranked = sorted((c if np.isfinite(c) else np.inf, i, y0) for i, (c, y0) in enumerate(zip(costs, starts)))
 
     def run(y, method):

@@ -130,19 +130,19 @@ class Calibration(eqx.Module):
 
     @property
     def fu(self) -> float:
-        return float(self.K[0, 0])
+        return float(np.asarray(self.K)[0, 0])
 
     @property
     def fv(self) -> float:
-        return float(self.K[1, 1])
+        return float(np.asarray(self.K)[1, 1])
 
     @property
     def u0(self) -> float:
-        return float(self.K[0, 2])
+        return float(np.asarray(self.K)[0, 2])
 
     @property
     def v0(self) -> float:
-        return float(self.K[1, 2])
+        return float(np.asarray(self.K)[1, 2])
 
     @property
     def principal_point(self) -> np.ndarray:

@@ -123,7 +123,7 @@ class Homology(eqx.Module):
         the outline (or a rough, densely sampled outline) it is optimistic, so the test
         errs towards calling ``v_x`` finite.  :func:`sorjax.calibrate` acts on it only
         when the joint estimate cannot fix the focal length either."""
-        if abs(float(self.v_x[2])) < 1e-9:
+        if abs(float(np.asarray(self.v_x)[2])) < 1e-9:
             return True
         return self.infinity_z is not None and bool(self.infinity_z < INFINITY_Z)
 
@@ -279,7 +279,7 @@ def mirror_candidates(points_n: np.ndarray, samples, keep: int = 3):
     offsets = np.asarray(_GRID_OFFSETS)
     knots = points_n[np.linspace(0, len(points_n), _GRID_KNOTS, endpoint=False).astype(int)]
     sub = samples[:: max(1, samples.shape[0] // _GRID_SAMPLES)]
-    c = np.asarray(_mirror_costs(jnp.asarray(knots), sub, jnp.asarray(thetas), jnp.asarray(offsets)))
+    c = np.asarray(_mirror_costs(knots, sub, thetas, offsets))
     best = c.min(axis=1)
     is_min = (best <= np.roll(best, 1)) & (best <= np.roll(best, -1))
     order = [i for i in np.argsort(best) if is_min[i]][:keep]
@@ -368,7 +368,7 @@ def _refine_candidates(field, samples, weights, cands, max_steps: int = 100):
     for i in range(0, len(starts), SCREEN_BATCH):
         chunk = starts[i:i + SCREEN_BATCH]
         chunk = chunk + [chunk[0]] * (SCREEN_BATCH - len(chunk))
-        c, p, n = _screen(field, samples, weights, *(jnp.asarray(np.stack(a)) for a in zip(*chunk)))
+        c, p, n = _screen(field, samples, weights, *(np.stack(a) for a in zip(*chunk)))
         costs.append(np.asarray(c))
         ps.append(np.asarray(p))
         steps0.append(np.asarray(n))
@@ -381,8 +381,8 @@ def _refine_candidates(field, samples, weights, cands, max_steps: int = 100):
         raise FloatingPointError("every start of the homology fit gave a non-finite cost")
     k = int(np.argmin(costs))  # the first of equal costs, as the serial screen kept
     cost0 = float(costs[k])
-    v0, E = (jnp.asarray(a) for a in starts[k][1:])
-    out0_p = jnp.asarray(ps[k])
+    v0, E = starts[k][1:]
+    out0_p = ps[k]
 
     def run(p, method):
         out = _refine_jit(field, samples, weights, p, v0, E, max_steps=max_steps, method=method)
@@ -505,20 +505,14 @@ def _to_pixels(T: np.ndarray, v, l, cost, ok, steps, scale, n_samples, conic, z=
     l_pix = l_pix / np.linalg.norm(l_pix[:2])
     cost_px = float(cost) * scale**2
     W = np.eye(3) - 2.0 * np.outer(v_pix, l_pix) / (v_pix @ l_pix)
-    opt = lambda x: None if x is None else jnp.asarray(x)  # noqa: E731
-    return Homology(
-        l_s=jnp.asarray(l_pix),
-        v_x=jnp.asarray(v_pix),
-        W=jnp.asarray(W),
-        rms=jnp.asarray(np.sqrt(cost_px / n_samples)),
-        cost=jnp.asarray(cost_px),
-        converged=jnp.asarray(bool(ok)),
-        steps=jnp.asarray(int(steps)),
-        conic_rms=jnp.asarray(float(conic) * scale),
-        infinity_z=opt(None if z is None else float(z)),
-        inliers=opt(inliers),
-        rms_untrimmed=opt(None if rms_untrimmed is None else float(rms_untrimmed)),
+    fields = dict(
+        l_s=l_pix, v_x=v_pix, W=W, rms=np.sqrt(cost_px / n_samples), cost=np.float64(cost_px),
+        converged=np.bool_(bool(ok)), steps=np.int64(int(steps)), conic_rms=np.float64(float(conic) * scale),
+        infinity_z=None if z is None else np.float64(float(z)),
+        inliers=None if inliers is None else np.asarray(inliers),
+        rms_untrimmed=None if rms_untrimmed is None else np.float64(float(rms_untrimmed)),
     )
+    return Homology(**jax.device_put(fields))  # one transfer for every field
 
 
 def fit_homology(
@@ -559,7 +553,7 @@ def fit_homology(
     scale = 1.0 / T[0, 0]
     pn = transform_points(T, pts)
     smooth = float(smooth_px) / (perimeter(pts) / o.n_points) if smooth_px else 0.0
-    field, samples, weights = _view_setup(jnp.asarray(pn), n_samples, smooth)
+    field, samples, weights = _view_setup(pn, n_samples, smooth)
     conic = fit_conic(pn)
     if init is not None:
         v0, l0 = (np.asarray(a, dtype=np.float64) for a in init)
@@ -574,5 +568,5 @@ def fit_homology(
         fit, inliers = _robust_refits(field, samples, weights, fit, scale, max_steps)
     v, l, cost, ok, steps, _ = fit
     w = w_np * inliers
-    z = _infinity_z(field, samples, jnp.asarray(w), jnp.asarray(v), jnp.asarray(l), jnp.asarray(cost))
+    z = _infinity_z(field, samples, w, np.asarray(v), np.asarray(l), np.float64(cost))
     return _to_pixels(T, v, l, cost, ok, steps, scale, float(np.sum(w)), conic[1], z, inliers, rms_all)
