@@ -51,9 +51,9 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from ._camera import normalising_transform, transform_points
-from ._field import DistanceField, curve_points, make_field, sample_weights, signed_distances
+from ._field import DistanceField, closest_parameter, curve_points, make_field, sample_weights, signed_distances
 from ._outline import DEFAULT_POINTS, make_outline, perimeter
-from ._solvers import Solved, polish, solvers
+from ._solvers import STALE_TOL, Solved, polish, solvers, until_fresh
 
 DEFAULT_SAMPLES = 100
 INFINITY_Z = 3.0
@@ -153,13 +153,15 @@ def transfer(W: Float[Array, "3 3"], x: Float[Array, "N 2"]) -> Float[Array, "N 
 
 
 def symmetry_residuals(
-    v: Float[Array, "3"], l: Float[Array, "3"], samples: Float[Array, "N 2"], field: DistanceField, weights=None
+    v: Float[Array, "3"], l: Float[Array, "3"], samples: Float[Array, "N 2"], field: DistanceField, weights=None,
+    hints=None,
 ) -> Float[Array, "N"]:
     """The residuals of eq. 20: ``w_i d(W(v, l) x_i)`` for each sample ``x_i``, in the
     units of the field (pixels if the field and samples are in pixels); ``weights``
     ``w_i`` default to 1 (:func:`sorjax._field.sample_weights` zeroes samples at
-    corners)."""
-    r = signed_distances(field, transfer(homology_matrix(v, l), samples))
+    corners); ``hints`` (N,) optional closest-point parameters to search near
+    (:func:`sorjax._field.closest_parameter_near`)."""
+    r = signed_distances(field, transfer(homology_matrix(v, l), samples), hints)
     return r if weights is None else r * weights
 
 
@@ -307,9 +309,10 @@ def _residuals(p, args):
     the direction from the outline's centre to ``v`` (1 for a mirror symmetry), above
     0.99 in every synthetic view we measured, so the barrier is 0 at every real
     solution and only walls off the degenerate ones."""
-    field, samples, weights, v0, E = args
+    field, samples, weights, v0, E = args[:5]
+    hints = args[5] if len(args) > 5 else None  # closest-point parameters to search near
     v, l = _unpack(p, v0, E)
-    r = symmetry_residuals(v, l, samples, field, weights)
+    r = symmetry_residuals(v, l, samples, field, weights, hints)
     a = jnp.abs(v @ l) / jnp.linalg.norm(l)
     return jnp.concatenate([r, _BARRIER_GAIN * jax.nn.relu(_BARRIER_AT - a)[None]])
 
@@ -328,13 +331,23 @@ def refine(field: DistanceField, samples, weights, p0, v0, E, max_steps: int = 1
     """Minimise eq. 20 from one start ``(p0, v0, E)`` (normalised coordinates) with
     ``method``: "lm" (Levenberg-Marquardt), "gn" (Gauss-Newton) or "screen" (loose
     Levenberg-Marquardt: the screening stage of :func:`fit_homology`).  Returns
-    ``(v, l, cost, converged, steps, p, r)`` with ``r`` eq. 20's residuals; pure,
-    jit/vmap-able."""
+    ``(v, l, cost, converged, steps, p, r, stale)`` with ``r`` eq. 20's residuals; pure,
+    jit/vmap-able.
+
+    As in the bundle (:func:`sorjax._bundle.solve`) the solver searches each closest
+    point only near where it was at ``p0``; ``r`` and the cost are searched over the
+    whole outline, and ``stale`` says that they differ from the solver's (a closest
+    point left its window: solve again from ``p``)."""
     args = (field, samples, weights, v0, E)
-    sol = optx.least_squares(_residuals, _SOLVERS[method], p0, args=args, max_steps=max_steps, throw=False)
+    v_s, l_s = _unpack(p0, v0, E)
+    hints = jax.vmap(closest_parameter, in_axes=(None, 0))(field, transfer(homology_matrix(v_s, l_s), samples))
+    sol = optx.least_squares(_residuals, _SOLVERS[method], p0, args=args + (hints,), max_steps=max_steps,
+                             throw=False)
     v, l = _unpack(sol.value, v0, E)
     r = _residuals(sol.value, args)
-    return v, l, jnp.sum(r**2), sol.result == optx.RESULTS.successful, sol.stats["num_steps"], sol.value, r[:-1]
+    stale = jnp.max(jnp.abs(r - _residuals(sol.value, args + (hints,)))) > STALE_TOL
+    ok = sol.result == optx.RESULTS.successful
+    return v, l, jnp.sum(r**2), ok, sol.stats["num_steps"], sol.value, r[:-1], stale
 
 
 @functools.partial(jax.jit, static_argnames=("n_samples", "smooth"))
@@ -385,8 +398,12 @@ def _refine_candidates(field, samples, weights, cands, max_steps: int = 100):
     out0_p = ps[k]
 
     def run(p, method):
-        out = _refine_jit(field, samples, weights, p, v0, E, max_steps=max_steps, method=method)
-        return Solved(out[5], bool(out[3]), float(out[2]), int(out[4]), out)
+        def once(p):
+            out = _refine_jit(field, samples, weights, p, v0, E, max_steps=max_steps, method=method)
+            return out, out[5], int(out[4]), bool(out[7])
+
+        out, steps = until_fresh(once, p)
+        return Solved(out[5], bool(out[3]), float(out[2]), steps, out)
 
     final, steps = polish(run, out0_p, cost0)
     out = final.out

@@ -26,6 +26,12 @@ import numpy as np
 import optimistix as optx
 
 NULL_RCOND = 1e-6
+# The solvers search each closest point of the distance fields only near where it was at
+# the start (sorjax._field.closest_parameter_near); a solve whose residuals differ from
+# whole-outline ones by more than STALE_TOL (normalised units, ~1e-7 px: another closest
+# point, not round-off) is "stale" and is run again from its end, RESOLVES times at most.
+STALE_TOL = 1e-9
+RESOLVES = 3
 SCREEN = optx.LevenbergMarquardt(rtol=1e-4, atol=1e-6)
 
 
@@ -47,6 +53,19 @@ class Solved(NamedTuple):
     cost: float
     steps: int
     out: Any
+
+
+def until_fresh(solve_once: Callable[[Any], tuple], y0) -> tuple[Any, int]:
+    """``solve_once(y) -> (out, y_end, steps, stale)``, run from ``y0`` and again from
+    its end while it reports ``stale`` (``RESOLVES`` runs at most).  Returns the last
+    ``out`` and the steps of all runs."""
+    steps, y = 0, y0
+    for _ in range(RESOLVES):
+        out, y, n, stale = solve_once(y)
+        steps += n
+        if not stale:
+            break
+    return out, steps
 
 
 def polish(run: Callable[[Any, str], Solved], y0, cost0: float) -> tuple[Solved, int]:

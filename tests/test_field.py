@@ -47,6 +47,32 @@ def test_distance_within_5px_is_accurate(n):
     assert err.max() < 0.01, err.max()  # issue 4's bound: 0.01 px within 5 px
 
 
+def test_hinted_search_matches_the_whole_outline_search_near_its_hint():
+    """The solvers search each closest point only near a hint (its parameter at the
+    solve's start).  Within NEAR_WINDOW decimated knots of the true closest point it
+    finds the same point (value and gradient); a hint on the far side of the outline
+    gives another point, farther away, which is what the solvers' staleness test
+    (residuals compared with whole-outline ones) catches."""
+    from sorjax._field import NEAR_WINDOW, SEARCH_KNOTS, closest_parameter
+
+    field = ellipse_field(n=2048)
+    m = field.n_knots
+    reach = NEAR_WINDOW * max(1, m // SEARCH_KNOTS)
+    rng = np.random.default_rng(3)
+    t = rng.uniform(0, 2 * np.pi, 500)
+    r = rng.uniform(-5, 5, 500)
+    q = jnp.asarray(np.stack([CX + (A + r) * np.cos(t), CY + (B + r) * np.sin(t)], 1))
+    t_true = jax.vmap(closest_parameter, in_axes=(None, 0))(field, q)
+    whole = np.asarray(signed_distances(field, q))
+    near = jnp.mod(t_true + rng.uniform(-(reach - 1), reach - 1, 500), m)
+    np.testing.assert_allclose(np.asarray(jax.jit(signed_distances)(field, q, near)), whole, rtol=0, atol=1e-12)
+    g = jax.vmap(jax.grad(signed_distance, argnums=1), in_axes=(None, 0, 0))(field, q, near)
+    g0 = jax.vmap(jax.grad(signed_distance, argnums=1), in_axes=(None, 0))(field, q)
+    np.testing.assert_allclose(np.asarray(g), np.asarray(g0), atol=1e-10)
+    far = np.asarray(signed_distances(field, q, jnp.mod(t_true + m / 2, m)))
+    assert np.min(np.abs(far - whole)) > 1e-3  # a stale hint shows (the solvers test at 1e-9)
+
+
 def test_gradient_matches_central_differences():
     field = ellipse_field()
     rng = np.random.default_rng(1)
