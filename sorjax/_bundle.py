@@ -300,8 +300,9 @@ def covariance(y, problem: BundleProblem, T):
     (their covariances with the others NaN) -- a pseudo-inverse would silently give
     them zero variance instead."""
     flat, unravel = jax.flatten_util.ravel_pytree(y)
-    J = jax.jacfwd(lambda f: residuals(unravel(f), problem))(flat)
-    r = residuals(y, problem)
+    feet = foot_parameters(y, problem)  # searched once; exact hints for J, r and the mirror pairs
+    J = jax.jacfwd(lambda f: residuals(unravel(f), problem, feet))(flat)
+    r = residuals(y, problem, feet)
     nk = y[0].shape[0]
     dof = jnp.maximum(jnp.sum(problem.weights) - n_params(y, problem), 1)
     s2 = jnp.sum(r**2) / dof
@@ -312,7 +313,7 @@ def covariance(y, problem: BundleProblem, T):
     lam, U = jnp.linalg.eigh(0.5 * (F + F.T))
     null = lam <= NULL_EIGENVALUE * jnp.max(jnp.abs(lam))
     F_inv = (U * jnp.where(null, 0.0, 1.0 / jnp.where(null, 1.0, lam))) @ U.T
-    meat = _correlated_meat(G, r, y, problem, s2)
+    meat = _correlated_meat(G, r, feet, problem, s2)
     cov_k = F_inv @ meat @ F_inv
 
     g = J.T @ r  # the Gauss-Newton step's length in standard deviations (step_sigmas)
@@ -329,7 +330,7 @@ def covariance(y, problem: BundleProblem, T):
     return cov, s2, step
 
 
-def _correlated_meat(G, r, y, problem: BundleProblem, s2):
+def _correlated_meat(G, r, feet, problem: BundleProblem, s2):
     """``G^T Sigma_r G`` for residuals that are correlated, as eq. 20's are.
 
     Residual ``i`` of a view reads the outline's noise at its sample ``x_i`` *and* at
@@ -345,7 +346,7 @@ def _correlated_meat(G, r, y, problem: BundleProblem, s2):
     V, N = problem.samples.shape[:2]
     M = problem.fields.control.shape[-2]
     idx = jnp.arange(N)
-    j = jnp.round(foot_parameters(y, problem) * N / M).astype(jnp.int32) % N  # (V, N)
+    j = jnp.round(feet * N / M).astype(jnp.int32) % N  # (V, N): the sample nearest each foot
     gap = jnp.minimum((j - idx) % N, (idx - j) % N)
     offs = (jnp.arange(V) * N)[:, None]
     jm = (j + offs).reshape(-1)
