@@ -1,13 +1,17 @@
 """Speed of sorjax on the paper's Table 1, against a plain numpy/scipy baseline.
 
-Three measurements, printed as a table:
+Four measurements, printed as a table:
 
 1. The whole ``configs/table1.toml`` (or ``--trials`` per cell) through
-   ``sorjax.experiment.run_trials`` with every CPU core, wall time including JAX's
-   compilation (a fresh compilation cache is used unless ``--warm-cache``).
-2. One warm 3-view bundle calibration (two-sphere scene, f = 700 px, sigma = 1 px,
+   ``sorjax.experiment.run_trials`` with one worker per CPU core (``--workers``), wall
+   time including JAX's compilation (a fresh compilation cache is used unless
+   ``--warm-cache``).
+2. One warm Table 1 trial (every method) in one process, at sigma = 2 px: the cost per
+   trial once compiled; the table's wall time less trials x this is compilation,
+   tracing and what the workers lose to each other.
+3. One warm 3-view bundle calibration (two-sphere scene, f = 700 px, sigma = 1 px,
    homologies given): median over repeated calls of ``calibrate(method="bundle")``.
-3. A baseline written the way a researcher would without sorjax: numpy +
+4. A baseline written the way a researcher would without sorjax: numpy +
    ``scipy.optimize.least_squares`` on the same residuals (eq. 20: distance from the
    transferred samples to the outline polyline, nearest vertex by a k-d tree then the
    two adjacent segments), per-view fits from the same automatic starting candidates,
@@ -17,6 +21,7 @@ Three measurements, printed as a table:
 
     python experiments/speed.py                     # full Table 1 (1400 calibrations)
     python experiments/speed.py --trials 10         # 10 trials per cell
+    python experiments/speed.py --workers 1         # the table in one worker process
 """
 
 from __future__ import annotations
@@ -30,17 +35,41 @@ import time
 import numpy as np
 
 
-def run_table1(trials: int | None, warm_cache: bool) -> tuple[float, int]:
-    if not warm_cache:
-        os.environ["SORJAX_CACHE"] = tempfile.mkdtemp(prefix="sorjax-xla-")
-    from sorjax.experiment import load_config, run_trials
+def _table1_config(trials: int | None = None):
+    from sorjax.experiment import load_config
 
     cfg = load_config(os.path.join(os.path.dirname(__file__), "..", "configs", "table1.toml"))
-    if trials is not None:
-        cfg = cfg.replace(trials=trials)
+    return cfg if trials is None else cfg.replace(trials=trials)
+
+
+def run_table1(trials: int | None, warm_cache: bool, workers: int) -> tuple[float, int]:
+    if not warm_cache:
+        os.environ["SORJAX_CACHE"] = tempfile.mkdtemp(prefix="sorjax-xla-")
+    from sorjax.experiment import run_trials
+
     t0 = time.perf_counter()
-    recs = run_trials(cfg, workers=0, progress=True)
+    recs = run_trials(_table1_config(trials), workers=workers, progress=True)
     return time.perf_counter() - t0, len(recs)
+
+
+def steady_trial(n: int = 20) -> dict[str, float]:
+    """Warm time of one Table 1 trial (every method) in this process, ms, for the cells
+    sigma = 2 px at f = 700 and 1400: the cost per trial once everything is compiled
+    (the rest of the table's wall time is compilation and tracing, per worker)."""
+    from sorjax.experiment._trials import run_trial
+
+    cfg = _table1_config()
+    out = {}
+    for r, row in enumerate(cfg.rows()):
+        if row["sigma"] != 2.0:
+            continue
+        ts = []
+        for t in range(2 * n):  # the first half warms up; median: a rare path's compilation is no trial's cost
+            t0 = time.perf_counter()
+            run_trial(cfg, r, row, t)
+            ts.append(time.perf_counter() - t0)
+        out[f"f = {row['f']:g}"] = 1000 * statistics.median(ts[n:])
+    return out
 
 
 def warm_bundle(repeats: int = 30) -> tuple[float, float]:
@@ -221,12 +250,17 @@ def main(argv=None):
     p.add_argument("--baseline-trials", type=int, default=10)
     p.add_argument("--warm-cache", action="store_true", help="reuse the on-disk compilation cache")
     p.add_argument("--skip-table", action="store_true")
+    p.add_argument("--workers", type=int, default=0, help="worker processes for the table (0: one per core)")
     a = p.parse_args(argv)
     lines = []
     if not a.skip_table:
-        wall, n = run_table1(a.trials, a.warm_cache)
-        lines.append(f"Table 1, {n} calibrations (I, IIa, IIb, bundle, bundle-unit), {os.cpu_count()} cores: "
-                     f"{wall:.1f} s wall incl. compilation ({1000 * wall / n:.0f} ms per calibration); target 30 s")
+        wall, n = run_table1(a.trials, a.warm_cache, a.workers)
+        w = a.workers or os.cpu_count()
+        lines.append(f"Table 1, {n} trials (I, IIa, IIb, bundle, bundle-unit), {os.cpu_count()} cores, {w} workers: "
+                     f"{wall:.1f} s wall incl. compilation ({1000 * wall / n:.0f} ms per trial); target 30 s")
+    steady = steady_trial()
+    lines.append("one warm Table 1 trial (every method, one process, sigma 2 px, median): "
+                 + ", ".join(f"{k}: {v:.0f} ms" for k, v in steady.items()))
     t_raw, t_val = warm_bundle()
     lines.append(f"one warm 3-view bundle calibration (homologies given): {1000 * t_val:.1f} ms from validated "
                  f"Outlines, {1000 * t_raw:.1f} ms from raw arrays (validated every call); target 10 ms")
