@@ -18,7 +18,10 @@ normal to the curve, so ``d d / d x = n(t*)`` exactly (envelope theorem) and the
 derivatives with respect to the outline points are also exact to first order.  The
 field is therefore C^1 wherever the closest point is unique (everywhere within the
 curve's smallest radius of curvature, e.g. within 5 px of any outline that is not
-sharper than that), with no kinks at the knots.
+sharper than that), with no kinks at the knots.  Solvers pass a ``hint`` (the closest
+point's parameter at their start) to search only the knots near it
+(:func:`closest_parameter_near`, a third of the distances) and check their result
+against the whole-outline search at the end.
 
 Optionally the points are first smoothed along the curve by a circular Gaussian of
 ``smooth`` samples, which suppresses the target outline's own noise (it shrinks a
