@@ -55,9 +55,9 @@ from jaxtyping import Array, Float
 
 from ._camera import intrinsics_matrix, omega_matrix, omega_vector_from_intrinsics
 from ._camera import pixel_intrinsics as _pixel_intrinsics
-from ._field import DistanceField, closest_parameter, curve_points, make_field, sample_weights
-from ._homology import homology_matrix, symmetry_residuals, transfer
-from ._solvers import NULL_RCOND, STALE_TOL, Solved, polish, solvers, until_fresh
+from ._field import DistanceField, curve_points, make_field, sample_weights
+from ._homology import symmetry_feet, symmetry_residuals
+from ._solvers import NULL_RCOND, Solved, is_stale, polish, solvers, until_fresh
 
 
 class BundleProblem(eqx.Module):
@@ -147,11 +147,7 @@ def foot_parameters(y, problem: BundleProblem) -> Float[Array, "V N"]:
     """Per view and sample, the parameter of the outline's point closest to the
     transferred sample ``W_j x_ij`` (knot units; whole-outline search, no gradient)."""
     v, l = pole_polar_pairs(y, problem)
-
-    def view(field, samples, v, l):
-        return jax.vmap(closest_parameter, in_axes=(None, 0))(field, transfer(homology_matrix(v, l), samples))
-
-    return jax.vmap(view)(problem.fields, problem.samples, v, l)
+    return jax.vmap(symmetry_feet)(v, l, problem.samples, problem.fields)
 
 
 def _hinted_residuals(y, args):
@@ -202,9 +198,8 @@ def solve(y0, problem: BundleProblem, max_steps: int = 200, method: str = "lm"):
     sol = optx.least_squares(_hinted_residuals, _SOLVERS[method], y0, args=(problem, hints), max_steps=max_steps,
                              throw=False)
     r = residuals(sol.value, problem)
-    stale = jnp.max(jnp.abs(r - residuals(sol.value, problem, hints))) > STALE_TOL
+    stale = is_stale(r, residuals(sol.value, problem, hints))
     return sol.value, sol.result, sol.stats["num_steps"], r, stale
-
 
 
 # The no-perspective reference: the focal length held at ORTHO_LOG_F (log of a focal
@@ -235,6 +230,7 @@ def orthographic_cost(y, problem: BundleProblem, max_steps: int = 100):
     k0 = jnp.asarray(k0)
     if k0.shape[0] == 3:  # known aspect, compact chart: pad it
         k0 = jnp.concatenate([k0[:1], k0])
+
     def once(z):
         z, cost, stale = _orthographic_solve(z, k0, problem, max_steps=max_steps)
         return cost, z, 0, bool(stale)
@@ -262,7 +258,7 @@ def _orthographic_solve(z0, k0, problem: BundleProblem, max_steps: int = 100):
 
     sol = optx.least_squares(res, _ORTHO_SOLVER, z0, args=hints, max_steps=max_steps, throw=False)
     r = residuals(_orthographic_params(sol.value, k0, problem), problem)
-    stale = jnp.max(jnp.abs(r - res(sol.value, hints))) > STALE_TOL
+    stale = is_stale(r, res(sol.value, hints))
     return sol.value, jnp.sum(r**2), stale
 
 

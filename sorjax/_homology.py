@@ -53,7 +53,7 @@ from jaxtyping import Array, Bool, Float, Int
 from ._camera import normalising_transform, transform_points
 from ._field import DistanceField, closest_parameter, curve_points, make_field, sample_weights, signed_distances
 from ._outline import DEFAULT_POINTS, make_outline, perimeter
-from ._solvers import STALE_TOL, Solved, polish, solvers, until_fresh
+from ._solvers import Solved, is_stale, polish, solvers, until_fresh
 
 DEFAULT_SAMPLES = 100
 INFINITY_Z = 3.0
@@ -163,6 +163,14 @@ def symmetry_residuals(
     (:func:`sorjax._field.closest_parameter_near`)."""
     r = signed_distances(field, transfer(homology_matrix(v, l), samples), hints)
     return r if weights is None else r * weights
+
+
+def symmetry_feet(v: Float[Array, "3"], l: Float[Array, "3"], samples: Float[Array, "N 2"],
+                  field: DistanceField) -> Float[Array, " N"]:
+    """Parameters (knot units) of the outline's points closest to the transferred
+    samples ``W(v, l) x_i`` (whole-outline search, no gradient): the hints of a solve
+    started at ``(v, l)``."""
+    return jax.vmap(closest_parameter, in_axes=(None, 0))(field, transfer(homology_matrix(v, l), samples))
 
 
 def _tangent_basis(v0: np.ndarray) -> np.ndarray:
@@ -339,13 +347,12 @@ def refine(field: DistanceField, samples, weights, p0, v0, E, max_steps: int = 1
     whole outline, and ``stale`` says that they differ from the solver's (a closest
     point left its window: solve again from ``p``)."""
     args = (field, samples, weights, v0, E)
-    v_s, l_s = _unpack(p0, v0, E)
-    hints = jax.vmap(closest_parameter, in_axes=(None, 0))(field, transfer(homology_matrix(v_s, l_s), samples))
+    hints = symmetry_feet(*_unpack(p0, v0, E), samples, field)
     sol = optx.least_squares(_residuals, _SOLVERS[method], p0, args=args + (hints,), max_steps=max_steps,
                              throw=False)
     v, l = _unpack(sol.value, v0, E)
     r = _residuals(sol.value, args)
-    stale = jnp.max(jnp.abs(r - _residuals(sol.value, args + (hints,)))) > STALE_TOL
+    stale = is_stale(r, _residuals(sol.value, args + (hints,)))
     ok = sol.result == optx.RESULTS.successful
     return v, l, jnp.sum(r**2), ok, sol.stats["num_steps"], sol.value, r[:-1], stale
 

@@ -55,6 +55,14 @@ class Solved(NamedTuple):
     out: Any
 
 
+def is_stale(r_whole, r_near):
+    """Whether a solve's residuals searched near their hints (``r_near``) differ from
+    the whole-outline ones (``r_whole``) by more than ``STALE_TOL``: traced, jit-safe."""
+    import jax.numpy as jnp
+
+    return jnp.max(jnp.abs(r_whole - r_near)) > STALE_TOL
+
+
 def until_fresh(solve_once: Callable[[Any], tuple], y0) -> tuple[Any, int]:
     """``solve_once(y) -> (out, y_end, steps, stale)``, run from ``y0`` and again from
     its end while it reports ``stale`` (``RESOLVES`` runs at most).  Returns the last
