@@ -363,26 +363,41 @@ def make_problem(points_n, n_samples: int, aspect=None, inliers=None) -> BundleP
 
     Concrete inputs (numpy) only.  The last few problems are kept, keyed by the exact
     bytes of the inputs: comparing estimators calls :func:`sorjax.calibrate` once per
-    method on the same outlines (five times a trial in Table 1), and each needs it."""
+    method on the same outlines (five times a trial in Table 1), and each needs it; the
+    fields, samples and weights are shared by both aspect-ratio models."""
     pts = np.ascontiguousarray(points_n, dtype=np.float64)
     inl = None if inliers is None else np.ascontiguousarray(inliers, dtype=np.float64)
     a = None if aspect is None else float(aspect)
-    key = (pts.shape, pts.tobytes(), int(n_samples), a, None if inl is None else inl.tobytes())
-    hit = _PROBLEMS.get(key)
+    geo_key = (pts.shape, pts.tobytes(), int(n_samples), None if inl is None else inl.tobytes())
+    key = geo_key + (a,)
+    hit = _cached(_PROBLEMS, key)
     if hit is not None:
-        _PROBLEMS.move_to_end(key)
         return hit
-    fields, samples, weights = _setup(jnp.asarray(pts), n_samples)
-    if inl is not None:
-        weights = weights * jnp.asarray(inl, dtype=weights.dtype)
-    problem = BundleProblem(fields, samples, weights, jnp.asarray(np.nan if a is None else a))
-    _PROBLEMS[key] = problem
-    while len(_PROBLEMS) > _PROBLEM_CACHE_SIZE:
-        _PROBLEMS.popitem(last=False)
-    return problem
+    geometry = _cached(_GEOMETRY, geo_key)  # the same for either aspect-ratio model
+    if geometry is None:
+        fields, samples, weights = _setup(pts, n_samples)
+        if inl is not None:
+            weights = weights * inl
+        geometry = _keep(_GEOMETRY, geo_key, (fields, samples, weights))
+    return _keep(_PROBLEMS, key, BundleProblem(*geometry, jnp.asarray(np.nan if a is None else a)))
+
+
+def _cached(cache: collections.OrderedDict, key):
+    hit = cache.get(key)
+    if hit is not None:
+        cache.move_to_end(key)
+    return hit
+
+
+def _keep(cache: collections.OrderedDict, key, value):
+    cache[key] = value
+    while len(cache) > _PROBLEM_CACHE_SIZE:
+        cache.popitem(last=False)
+    return value
 
 
 _PROBLEMS: collections.OrderedDict = collections.OrderedDict()
+_GEOMETRY: collections.OrderedDict = collections.OrderedDict()
 _PROBLEM_CACHE_SIZE = 4
 
 
