@@ -73,6 +73,30 @@ def test_hinted_search_matches_the_whole_outline_search_near_its_hint():
     assert np.min(np.abs(far - whole)) > 1e-3  # a stale hint shows (the solvers test at 1e-9)
 
 
+def test_whole_outline_search_finds_the_closest_point_near_sharp_corners():
+    """Near a sharp corner the knot nearest a point can lie nearer the next decimated
+    knot than the best one: the search's last pass must reach it (with one decimation
+    step each side it did not, and the Newton steps settled on a wrong foot point).
+    Against a brute-force search over every knot, points scattered 3 px around the
+    corners of a star-shaped outline (ten 36-degree spikes)."""
+    from sorjax._field import _argmin, _newton_foot, closest_parameter
+
+    k = np.arange(4000)
+    ang = 2 * np.pi * k / 4000
+    rad = 100 + 60 * np.abs(((k % 400) - 200) / 200.0)  # ten sharp spikes and valleys
+    field = make_field(make_outline(np.stack([300 + rad * np.cos(ang), 300 + rad * np.sin(ang)], 1), 2048).points)
+    rng = np.random.default_rng(4)
+    corners = np.asarray(field.knots)[np.argsort(-np.abs(np.diff(np.asarray(field.knots), 2, axis=0)).sum(1))[:40] + 1]
+    q = jnp.asarray(np.repeat(corners, 25, axis=0) + rng.normal(0, 3, (1000, 2)))
+
+    def brute(x):
+        return _newton_foot(field, x, _argmin(jnp.sum((field.knots - x) ** 2, -1)).astype(jnp.float64))
+
+    exact = signed_distances(field, q, jax.vmap(brute)(q))
+    found = signed_distances(field, q, jax.vmap(closest_parameter, in_axes=(None, 0))(field, q))
+    assert float(jnp.max(jnp.abs(found - exact))) < 1e-6
+
+
 def test_gradient_matches_central_differences():
     field = ellipse_field()
     rng = np.random.default_rng(1)
