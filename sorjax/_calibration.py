@@ -253,9 +253,6 @@ def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples):
     l_n = _axes_normalised(homologies, T)
     y, res, steps, r, problem = fit_bundle(pts_n, l_n, seeds, aspect_ratio, n_samples,
                                            inliers=_inlier_mask(homologies, n_samples))
-    # dispatched together before any result is read: XLA runs them back to back (and
-    # side by side where a core is free) instead of one per Python round trip
-    ortho = orthographic_cost(y, problem)
     cov, s2, _ = covariance(y, problem, T)
     K, omega, vx, ls = solution_in_pixels(y, problem, T)
     ok = bool(res == optx.RESULTS.successful) and bool(np.all(np.isfinite(np.asarray(K))))
@@ -263,7 +260,7 @@ def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples):
     rv = np.asarray(r).reshape(len(outs), -1) * scale
     view_rms = jnp.asarray(np.sqrt(np.mean(rv**2, axis=1)))
     cost = float(np.sum(rv**2))
-    evidence = (float(ortho) * scale**2 - cost, float(np.sum(np.asarray(problem.weights))))
+    evidence = (float(orthographic_cost(y, problem)) * scale**2 - cost, float(np.sum(np.asarray(problem.weights))))
     cost = jnp.asarray(cost)
     return K, omega, code, cov, cost, view_rms, steps, vx, ls, float(np.sqrt(s2)) * scale, evidence
 

@@ -385,6 +385,8 @@ def _refine_candidates(field, samples, weights, cands, max_steps: int = 100):
     padded by repeating a start), then polish the lowest-cost one to convergence
     (Gauss-Newton, or Levenberg-Marquardt where that fails or ends above its start)."""
     starts = [_pack(v0, l0) for v0, l0 in cands]
+    if not starts:
+        raise FloatingPointError("every start of the homology fit gave a non-finite cost")
     costs, ps, steps0 = [], [], []
     for i in range(0, len(starts), SCREEN_BATCH):
         chunk = starts[i:i + SCREEN_BATCH]
@@ -393,9 +395,7 @@ def _refine_candidates(field, samples, weights, cands, max_steps: int = 100):
         costs.append(np.asarray(c))
         ps.append(np.asarray(p))
         steps0.append(np.asarray(n))
-    if not starts:
-        costs, ps, steps0 = [np.array([np.inf])], [np.zeros((1, 4))], [np.zeros(1, int)]
-    costs = np.concatenate(costs)[: max(len(starts), 1)]
+    costs = np.concatenate(costs)[: len(starts)]
     ps = np.concatenate(ps)
     costs = np.where(np.isfinite(costs), costs, np.inf)
     if not np.isfinite(costs).any():

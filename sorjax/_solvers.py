@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple
 
+import jax.numpy as jnp
 import lineax as lx
 import numpy as np
 import optimistix as optx
@@ -58,8 +59,6 @@ class Solved(NamedTuple):
 def is_stale(r_whole, r_near):
     """Whether a solve's residuals searched near their hints (``r_near``) differ from
     the whole-outline ones (``r_whole``) by more than ``STALE_TOL``: traced, jit-safe."""
-    import jax.numpy as jnp
-
     return jnp.max(jnp.abs(r_whole - r_near)) > STALE_TOL
 
 
