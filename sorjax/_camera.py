@@ -90,14 +90,22 @@ def intrinsics_from_omega_vector(w: Float[Array, "... 5"]):
     return fu, fv, u0, v0, pd
 
 
-def normalising_transform(points: np.ndarray) -> np.ndarray:
-    """Isotropic similarity ``T`` (3x3, numpy) that centres ``points`` (P, 2, pixels)
-    on their mean and scales their RMS distance from it to ``sqrt(2)``."""
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    c = points.mean(axis=0)
-    s = np.sqrt(np.mean(np.sum((points - c) ** 2, axis=1)) / 2.0)
-    s = s if s > 0 else 1.0
-    return np.array([[1 / s, 0, -c[0] / s], [0, 1 / s, -c[1] / s], [0, 0, 1.0]])
+def normalising_transform(points, weights=None):
+    """Isotropic similarity ``T`` (3x3) that centres ``points`` (..., P, 2, pixels) on
+    their mean and scales their RMS distance from it to ``sqrt(2)``.
+
+    numpy in, numpy out (at the boundary); a JAX array (or tracer) in gives the same
+    in ``jax.numpy`` (jit / vmap / grad clean).  ``weights`` (..., P), optional: a
+    weighted mean and RMS (0 leaves a point out; the views dropped by a calibration)."""
+    xp = np if isinstance(points, np.ndarray) and (weights is None or isinstance(weights, np.ndarray)) else jnp
+    points = xp.asarray(points, dtype=xp.float64).reshape(-1, 2)
+    w = xp.ones(points.shape[0]) if weights is None else xp.asarray(weights, dtype=xp.float64).reshape(-1)
+    sw = xp.maximum(xp.sum(w), 1e-300)
+    c = xp.sum(w[:, None] * points, axis=0) / sw
+    s = xp.sqrt(xp.sum(w * xp.sum((points - c) ** 2, axis=1)) / sw / 2.0)
+    s = xp.where(s > 0, s, 1.0)
+    o, z = xp.ones_like(s), xp.zeros_like(s)
+    return xp.stack([xp.stack([o / s, z, -c[0] / s]), xp.stack([z, o / s, -c[1] / s]), xp.stack([z, z, o])])
 
 
 def pixel_intrinsics(T, fu, fv, u0, v0) -> Float[Array, "4"]:

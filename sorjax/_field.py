@@ -259,3 +259,12 @@ def curve_points(field: DistanceField, n: int) -> Float[Array, "n 2"]:
     (evenly spaced in arc length to the accuracy of the knots' spacing)."""
     t = jnp.arange(n) * (field.n_knots / n)
     return jax.vmap(lambda s: curve(field, s)[0])(t)
+
+
+def setup(points: Float[Array, "M 2"], n_samples: int, smooth_samples: float = 0.0):
+    """The one field-setup routine: ``(field, samples, weights)`` of an outline's ``M``
+    evenly spaced points: its :class:`DistanceField`, ``n_samples`` evenly spaced
+    samples (:func:`curve_points`) and their corner weights (:func:`sample_weights`).
+    Pure; ``jax.vmap`` it over views."""
+    field = make_field(points, smooth_samples)
+    return field, curve_points(field, n_samples), sample_weights(field, n_samples)

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple
 
+import jax
 import jax.numpy as jnp
 import lineax as lx
 import numpy as np
@@ -86,3 +87,54 @@ def polish(run: Callable[[Any, str], Solved], y0, cost0: float) -> tuple[Solved,
         return gn, gn.steps
     lm = run(gn.y if improved else y0, "lm")
     return lm, gn.steps + lm.steps
+
+
+# ------------------------------------------------------------------ traced versions
+#
+# The same two control-flow patterns as pure functions of arrays (jit / vmap / grad
+# clean): ``lax.while_loop`` for the bounded re-solve and a select for the fallback.
+# Under ``vmap`` a batched loop runs until every lane is done, masking the finished
+# ones; the fallback solve starts from the Gauss-Newton end when that improved on the
+# start, so a lane that did not need it converges in a step or two.
+
+
+def until_fresh_traced(solve_once: Callable[[Any], tuple], y0) -> tuple[Any, Any, Any]:
+    """Traced :func:`until_fresh`: ``solve_once(y) -> (out, y_end, steps, stale)`` (all
+    arrays) run from ``y0``, then again from its end while ``stale``, ``RESOLVES``
+    runs at most.  Returns ``(out, y_end, steps)`` of the last run (steps summed).
+
+    The solver is traced once (inside the loop); the loop's first ``out`` is zeros of
+    the right shapes, replaced by the first run."""
+
+    shapes = jax.eval_shape(solve_once, y0)
+    zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes[0])
+
+    def cond(c):
+        i, stale = c[0], c[1]
+        return (i == 0) | (stale & (i < RESOLVES))
+
+    def body(c):
+        i, _, y, steps, _ = c
+        out, y_end, n, stale = solve_once(y)
+        return i + 1, jnp.asarray(stale, bool), y_end, steps + jnp.asarray(n, jnp.int32), out
+
+    init = (jnp.asarray(0, jnp.int32), jnp.asarray(True), y0, jnp.asarray(0, jnp.int32), zeros)
+    _, _, y, steps, out = jax.lax.while_loop(cond, body, init)
+    return out, y, steps
+
+
+def polish_traced(run: Callable[[Any, str], Solved], y0, cost0) -> tuple[Solved, Any]:
+    """Traced :func:`polish`: Gauss-Newton from ``y0`` (cost ``cost0``), then
+    Levenberg-Marquardt from the better of its end and ``y0``, whose result is kept
+    only where Gauss-Newton did not converge or ended above ``cost0``.  ``run(y,
+    method)`` returns a :class:`Solved` of arrays.  Returns ``(final, steps)``, the
+    steps counting both solves where the second was needed."""
+
+    gn = run(y0, "gn")
+    improved = jnp.isfinite(gn.cost) & (gn.cost <= cost0 * (1 + 1e-12))
+    use_gn = gn.ok & improved
+    start = jax.tree_util.tree_map(lambda a, b: jnp.where(improved, a, b), gn.y, y0)
+    lm = run(start, "lm")
+    final = jax.tree_util.tree_map(lambda a, b: jnp.where(use_gn, a, b), gn, lm)
+    steps = gn.steps + jnp.where(use_gn, 0, lm.steps)
+    return final, steps

@@ -1,0 +1,15 @@
+"""sorjax's functional core: the whole calibration as pure functions of fixed-shape
+arrays and ``equinox`` pytrees (jit / vmap / grad / shard clean).
+
+The data flow reads like the paper: outline points (V, M, 2) -> :func:`prepare_views`
+(normalisation, distance fields, samples, weights) -> per-view harmonic homologies ->
+the linear Methods I / IIa / IIb -> the joint bundle -> a result of arrays (K,
+covariance, integer codes, per-view diagnostics).  Views are masked, never removed, so
+a batch of calibrations stacks; thresholds live in :class:`Options` (static).
+
+:func:`sorjax.calibrate` is the friendly shell over this core: validation, warnings,
+messages.
+"""
+
+from ._options import Options as Options
+from ._prepare import Views as Views, joint_transform as joint_transform, prepare_views as prepare_views

@@ -1,0 +1,91 @@
+"""Every threshold of the calibration pipeline, in one documented object.
+
+:class:`Options` is an ``equinox.Module`` whose fields are all static (hashable Python
+numbers): passing it to a jitted core function selects a compiled program, it carries
+no arrays.  The defaults are the values the measurements in ``docs/results.md`` were
+made with; the comments say where each came from.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+
+
+class Options(eqx.Module):
+    """Thresholds and budgets of the per-view fit, the bundle and the verdicts.
+
+    Sizes and budgets (they fix the compiled program's shapes and loop bounds):
+
+    * ``n_samples``: samples per outline in eq. 20 (the paper's N = 100).
+    * ``max_steps``: step limit of the per-view polish (Gauss-Newton, then
+      Levenberg-Marquardt).
+    * ``bundle_max_steps``: step limit of each bundle solve.
+    * ``screen_steps``: loose Levenberg-Marquardt steps that screen every start of the
+      per-view fit (measured on 1000 noisy random views: 5 steps started 996 in the
+      right basin, 15 steps 997).
+    * ``trim_rounds``: robust re-weighting rounds of the per-view fit.
+
+    Per-view fit (pixels unless said otherwise):
+
+    * ``trim_k``, ``trim_floor_px``: a sample is an outlier when its residual exceeds
+      ``max(trim_k * 1.4826 * median|r|, trim_floor_px)``; never below half of the
+      samples are kept.
+    * ``infinity_z``: ``v_x`` is at infinity when within this many standard errors of
+      the line at infinity.
+    * ``conic_ratio``, ``conic_floor_px``: an outline is a conic (no calibration
+      information) when its conic residual is at most ``conic_ratio * rms +
+      conic_floor_px``.
+
+    Views kept or dropped:
+
+    * ``asymmetry_px``, ``asymmetry_rel``: dropped as not symmetric when the untrimmed
+      RMS symmetry residual exceeds both ``asymmetry_px`` and ``asymmetry_rel`` times
+      the outline's RMS radius (experiments/degenerate.py: noise of 2 px stays below
+      1.4 px; smooth random blobs of 20 % modulation 2.6 px).
+    * ``warn_asymmetry_px``: kept with a warning above this.
+    * ``max_trimmed``, ``note_trimmed``: dropped when the robust fit trimmed more than
+      ``max_trimmed`` of the samples; a note from ``note_trimmed`` on.
+
+    Verdicts on the estimate:
+
+    * ``undetermined``: an intrinsic whose standard deviation exceeds this fraction
+      of the focal length (a 3-sigma interval reaching zero) is not determined.
+    * ``min_focal_fraction``: a focal length below this fraction of the outlines'
+      extent is implausible (more than 90 deg of view).
+    * ``max_fov_deg``: with the image size known, a wider field of view is implausible.
+    * ``weak_rel_std``, ``residual_floor_px``: warn of weak geometry when a focal
+      length's relative std, for a residual of at least ``residual_floor_px``,
+      exceeds ``weak_rel_std``.
+    * ``outline_error_px``: systematic outline error the symmetry residual does not
+      show (0.1 px: good sub-pixel outlines; 0 for synthetic studies).
+    * ``perspective_z``, ``perspective_factor``: the focal length is determined only
+      when the best camera with no perspective fits worse by a z-score of at least
+      ``perspective_z`` and by at least ``perspective_factor * outline_error_px`` RMS.
+    """
+
+    n_samples: int = eqx.field(static=True, default=100)
+    max_steps: int = eqx.field(static=True, default=100)
+    bundle_max_steps: int = eqx.field(static=True, default=200)
+    screen_steps: int = eqx.field(static=True, default=5)
+    trim_rounds: int = eqx.field(static=True, default=3)
+
+    trim_k: float = eqx.field(static=True, default=4.0)
+    trim_floor_px: float = eqx.field(static=True, default=0.1)
+    infinity_z: float = eqx.field(static=True, default=3.0)
+    conic_ratio: float = eqx.field(static=True, default=1.5)
+    conic_floor_px: float = eqx.field(static=True, default=1e-3)
+
+    asymmetry_px: float = eqx.field(static=True, default=2.0)
+    asymmetry_rel: float = eqx.field(static=True, default=0.01)
+    warn_asymmetry_px: float = eqx.field(static=True, default=1.0)
+    max_trimmed: float = eqx.field(static=True, default=0.2)
+    note_trimmed: float = eqx.field(static=True, default=0.02)
+
+    undetermined: float = eqx.field(static=True, default=1.0 / 3.0)
+    min_focal_fraction: float = eqx.field(static=True, default=0.5)
+    max_fov_deg: float = eqx.field(static=True, default=120.0)
+    weak_rel_std: float = eqx.field(static=True, default=0.05)
+    residual_floor_px: float = eqx.field(static=True, default=0.1)
+    outline_error_px: float = eqx.field(static=True, default=0.1)
+    perspective_z: float = eqx.field(static=True, default=3.0)
+    perspective_factor: float = eqx.field(static=True, default=3.0)
