@@ -21,46 +21,9 @@ from ._bundle import (axis_params, covariance, fit_bundle, intrinsic_params, mak
                       solution_in_pixels)
 from ._linear import linear_in_pixels
 from ._outline import DEFAULT_POINTS, as_outlines
+from .core._result import RESULTS
 
 METHODS = ("bundle", "I", "IIa", "IIb")
-
-
-class RESULTS(eqx.Enumeration):
-    """Result codes of a calibration (in the style of ``optimistix.RESULTS``).
-
-    ``Calibration.message`` is the code's text followed by the specifics of the case
-    (``Calibration.details``)."""
-
-    successful = ""
-    not_positive_definite = (
-        "The image of the absolute conic estimated from these views is not positive "
-        "definite: no real camera agrees with them. The views are too noisy or too "
-        "few, or an outline is not a surface of revolution. Add views with stronger "
-        "perspective (objects off-centre, seen from above or below)."
-    )
-    not_converged = (
-        "The bundle adjustment did not converge. The outlines may not be surfaces of "
-        "revolution, or the views may not determine the camera; inspect view_rms."
-    )
-    too_few_views = (
-        "Fewer than two views carry calibration information (views whose outline is a "
-        "conic or is not symmetric are dropped). Add views of surfaces of revolution "
-        "whose profile is visible, from other positions."
-    )
-    degenerate = (
-        "The views do not determine the intrinsics with this method (e.g. fewer than two "
-        "views with a finite vanishing point, parallel constraint lines, or a direction "
-        "of the intrinsics the views leave free). Add views with the object placed "
-        "elsewhere in the image or tilted differently."
-    )
-    only_principal_point = (
-        "The views determine the principal point but not the focal length: in every view "
-        "the camera looked (almost) straight at the object's axis, so the vanishing point "
-        "v_x is at infinity and the imaged axis l_s passes through the principal point "
-        "(paper, Section 6). K holds the principal point (K[0, 2], K[1, 2]; "
-        "Calibration.principal_point) and NaN focal lengths. Add a view with the object "
-        "away from the image centre, or seen from higher or lower."
-    )
 
 
 class CalibrationError(RuntimeError):

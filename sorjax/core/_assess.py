@@ -1,0 +1,154 @@
+"""Verdicts on an estimate: which views are used, which intrinsics are determined.
+
+Pure functions of arrays (the numbers behind :func:`sorjax.calibrate`'s messages; the
+messages themselves are written at the edge, in :mod:`sorjax._calibration`).  The
+thresholds are :class:`sorjax.core.Options` fields; each rule is documented there.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, Int
+
+from ._options import Options
+
+# Why a view was left out (``CoreResult.drop_reason``); 0: used.
+USED, CONIC, TRIMMED, ASYMMETRIC, MASKED = 0, 1, 2, 3, 4
+DROP_REASONS = ("used", "conic outline", "not symmetric (too much trimmed)", "not symmetric", "masked by the caller")
+
+# Why an estimate is implausible (``Verdict.implausible``); 0: plausible.
+PLAUSIBLE, COLLAPSED_FOCAL, WIDE_FOV, PP_OUTSIDE = 0, 1, 2, 3
+
+
+def view_verdicts(rms, rms_untrimmed, radius, is_conic, trimmed, valid, options: Options) -> Int[Array, " V"]:
+    """Per view, why it is dropped (``USED`` when kept): a conic outline, more than
+    ``max_trimmed`` of its samples trimmed, or an untrimmed RMS symmetry residual above
+    both ``asymmetry_px`` and ``asymmetry_rel`` of its RMS radius (px); views the caller
+    masked (``valid`` False) are ``MASKED``.  The order of the tests is the order of the
+    messages: conic first."""
+    r = jnp.maximum(rms, rms_untrimmed)
+    asym = ~jnp.isfinite(r) | ((r > options.asymmetry_px) & (r > options.asymmetry_rel * radius))
+    reason = jnp.where(asym, ASYMMETRIC, USED)
+    reason = jnp.where(trimmed > options.max_trimmed, TRIMMED, reason)
+    reason = jnp.where(is_conic, CONIC, reason)
+    return jnp.where(valid, reason, MASKED).astype(jnp.int32)
+
+
+def outline_radius(points: Float[Array, "V M 2"]) -> Float[Array, " V"]:
+    """Each outline's RMS distance from its centroid (px)."""
+    c = jnp.mean(points, axis=-2, keepdims=True)
+    return jnp.sqrt(jnp.mean(jnp.sum((points - c) ** 2, -1), -1))
+
+
+def outline_extent(points: Float[Array, "V M 2"], used: Bool[Array, " V"]) -> Float[Array, ""]:
+    """The larger side of the used outlines' joint bounding box (px)."""
+    big = jnp.finfo(points.dtype).max
+    m = used[:, None, None]
+    hi = jnp.max(jnp.where(m, points, -big), axis=(0, 1))
+    lo = jnp.min(jnp.where(m, points, big), axis=(0, 1))
+    return jnp.max(hi - lo)
+
+
+def implausible(est: Float[Array, "4"], extent, image_size, options: Options) -> Int[Array, ""]:
+    """Why ``(fu, fv, u0, v0)`` (px) is implausible for a camera without distortion
+    that took outlines ``extent`` px across (``PLAUSIBLE`` when it is not): a focal
+    length below ``min_focal_fraction`` of the extent; with ``image_size = (width,
+    height)`` (NaN when unknown) a field of view above ``max_fov_deg`` or the principal
+    point outside the image."""
+    f = jnp.min(jnp.abs(est[:2]))
+    w, h = image_size[0], image_size[1]
+    known = jnp.isfinite(w) & jnp.isfinite(h)
+    fov = 2.0 * jnp.degrees(jnp.arctan(jnp.stack([w, h]) / (2.0 * jnp.maximum(jnp.abs(est[:2]), 1e-300))))
+    wide = known & (jnp.max(fov) > options.max_fov_deg)
+    outside = known & ~((est[2] >= -0.5) & (est[2] <= w - 0.5) & (est[3] >= -0.5) & (est[3] <= h - 0.5))
+    code = jnp.where(outside, PP_OUTSIDE, PLAUSIBLE)
+    code = jnp.where(wide, WIDE_FOV, code)
+    code = jnp.where(f < options.min_focal_fraction * extent, COLLAPSED_FOCAL, code)
+    return code.astype(jnp.int32)
+
+
+class Verdict(eqx.Module):
+    """Which intrinsics an estimate determines (arrays; see :func:`assess`).
+
+    Attributes:
+        determined: (4,) for ``(fu, fv, u0, v0)``.
+        std: (4,) standard deviations, px (the covariance scaled by the residual).
+        weak: the larger relative std of a focal length at a residual of at least
+            ``residual_floor_px``, when above ``weak_rel_std`` and all is determined;
+            else NaN.
+        aspect_weak: with a free aspect ratio, fu / fv is poorly determined.
+        implausible: why the estimate is implausible (0: it is not).
+    """
+
+    determined: Bool[Array, "4"]
+    std: Float[Array, "4"]
+    weak: Float[Array, ""]
+    aspect_weak: Bool[Array, ""]
+    implausible: Int[Array, ""]
+
+
+def assess(est, cov_unit, s_px, radius, extent, image_size, free_aspect, floor_verdict, perspective_ok,
+           options: Options) -> Verdict:
+    """Which of the raw estimate ``est = (fu, fv, u0, v0)`` (px) the views determine,
+    from the covariance per px^2 of residual ``cov_unit`` (4, 4) and the residual
+    standard error ``s_px``.  An intrinsic is determined when its std is finite and at
+    most ``undetermined`` times the focal length (the principal point: times the
+    outlines' RMS ``radius`` when the focal length is not determined).  With
+    ``floor_verdict`` (every ``v_x`` at infinity, where theory says the focal length is
+    free) the std is taken at a residual of at least ``residual_floor_px``, so the
+    estimate must fix the focal length robustly to override that.  Nothing is
+    determined without enough evidence for perspective (``perspective_ok``) or for an
+    implausible estimate (:func:`implausible`)."""
+    var = jnp.diag(cov_unit)
+    s_floor = jnp.maximum(s_px, options.residual_floor_px)
+    std = jnp.where(jnp.isfinite(var), jnp.sqrt(jnp.abs(var)), jnp.inf) * s_px
+    std_floor = std / jnp.maximum(s_px, 1e-300) * s_floor
+    judged = jnp.where(floor_verdict, std_floor, std)
+    why = implausible(est, extent, image_size, options)
+    focal_ok = jnp.isfinite(std[:2]) & (judged[:2] <= options.undetermined * jnp.abs(est[:2]))
+    ref = jnp.where(jnp.all(focal_ok), jnp.sqrt(jnp.abs(est[0] * est[1])), radius)
+    pp_ok = jnp.isfinite(std[2:]) & (judged[2:] <= options.undetermined * ref)
+    determined = jnp.concatenate([focal_ok, pp_ok]) & (why == PLAUSIBLE) & perspective_ok
+    rel_floor = std_floor[:2] / jnp.abs(est[:2])
+    all_det = jnp.all(determined)
+    weak = jnp.where(all_det & (jnp.max(rel_floor) > options.weak_rel_std), jnp.max(rel_floor), jnp.nan)
+    q = (cov_unit[0, 0] / est[0] ** 2 + cov_unit[1, 1] / est[1] ** 2 - 2 * cov_unit[0, 1] / (est[0] * est[1]))
+    aspect_weak = free_aspect & jnp.where(
+        ~all_det, True, jnp.isfinite(weak) & (jnp.sqrt(jnp.maximum(q, 0.0)) * s_floor > options.weak_rel_std))
+    return Verdict(determined, std, weak, aspect_weak, why)
+
+
+def perspective_gate(delta_px2, n, s_px, options: Options):
+    """``(ok, g_px, z)``: the evidence for perspective (the cost, px^2, by which the best
+    camera with no perspective fits worse, over ``n`` samples) as an RMS per sample
+    ``g_px`` and a z-score ``sqrt(delta) / s_px``; ``ok`` when ``z >= perspective_z`` and
+    ``g_px >= perspective_factor * outline_error_px``."""
+    d = jnp.maximum(delta_px2, 0.0)
+    g = jnp.sqrt(d / jnp.maximum(n, 1.0))
+    z = jnp.sqrt(d) / jnp.maximum(s_px, 1e-300)
+    return (z >= options.perspective_z) & (g >= options.perspective_factor * options.outline_error_px), g, z
+
+
+def axis_spread_deg(ls: Float[Array, "V 3"], used: Bool[Array, " V"]) -> Float[Array, ""]:
+    """Largest angle (degrees, 0..90) between the directions of the used imaged axes."""
+    t = jnp.arctan2(ls[:, 1], ls[:, 0])
+    d = jnp.abs(t[:, None] - t[None, :]) % jnp.pi
+    d = jnp.minimum(d, jnp.pi - d)
+    return jnp.degrees(jnp.max(jnp.where(used[:, None] & used[None, :], d, 0.0)))
+
+
+def axes_intersection(ls: Float[Array, "V 3"], used: Bool[Array, " V"]):
+    """Least-squares intersection of the used lines ``ls`` (``a^2 + b^2 = 1``):
+    ``(point (2,), cov (2, 2), spread_deg)``; ``cov`` NaN with fewer than 3 lines,
+    ``point`` NaN when they are (nearly, within 1 deg) parallel."""
+    w = used.astype(ls.dtype)
+    A, b = ls[:, :2] * w[:, None], -ls[:, 2] * w
+    N = A.T @ A
+    spread = axis_spread_deg(ls, used)
+    parallel = spread < 1.0
+    x = jnp.linalg.solve(jnp.where(parallel, jnp.eye(2), N), A.T @ b)
+    k = jnp.sum(w)
+    s2 = jnp.sum((A @ x - b) ** 2) / jnp.maximum(k - 2, 1.0)
+    cov = jnp.where(k >= 3, s2 * jnp.linalg.inv(jnp.where(parallel, jnp.eye(2), N)), jnp.nan)
+    return jnp.where(parallel, jnp.nan, x), jnp.where(parallel, jnp.nan, cov), spread
