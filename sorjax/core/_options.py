@@ -1,8 +1,10 @@
 """Every threshold of the calibration pipeline, in one documented object.
 
-:class:`Options` is an ``equinox.Module`` whose fields are all static (hashable Python
-numbers): passing it to a jitted core function selects a compiled program, it carries
-no arrays.  The defaults are the values the measurements in ``docs/results.md`` were
+:class:`Options` is an ``equinox.Module``.  Its sizes and budgets (integers) are
+static fields: they fix the compiled program's shapes and loop bounds.  Its thresholds
+(floats) are ordinary leaves: passed through ``jax.jit`` they are traced, so one
+compiled program serves any thresholds (and ``jax.vmap`` can sweep one).  Code in the
+core therefore uses the thresholds in array expressions only, never in Python ``if``.  The defaults are the values the measurements in ``docs/results.md`` were
 made with; the comments say where each came from.
 """
 
@@ -69,23 +71,23 @@ class Options(eqx.Module):
     screen_steps: int = eqx.field(static=True, default=5)
     trim_rounds: int = eqx.field(static=True, default=3)
 
-    trim_k: float = eqx.field(static=True, default=4.0)
-    trim_floor_px: float = eqx.field(static=True, default=0.1)
-    infinity_z: float = eqx.field(static=True, default=3.0)
-    conic_ratio: float = eqx.field(static=True, default=1.5)
-    conic_floor_px: float = eqx.field(static=True, default=1e-3)
+    trim_k: float = 4.0
+    trim_floor_px: float = 0.1
+    infinity_z: float = 3.0
+    conic_ratio: float = 1.5
+    conic_floor_px: float = 1e-3
 
-    asymmetry_px: float = eqx.field(static=True, default=2.0)
-    asymmetry_rel: float = eqx.field(static=True, default=0.01)
-    warn_asymmetry_px: float = eqx.field(static=True, default=1.0)
-    max_trimmed: float = eqx.field(static=True, default=0.2)
-    note_trimmed: float = eqx.field(static=True, default=0.02)
+    asymmetry_px: float = 2.0
+    asymmetry_rel: float = 0.01
+    warn_asymmetry_px: float = 1.0
+    max_trimmed: float = 0.2
+    note_trimmed: float = 0.02
 
-    undetermined: float = eqx.field(static=True, default=1.0 / 3.0)
-    min_focal_fraction: float = eqx.field(static=True, default=0.5)
-    max_fov_deg: float = eqx.field(static=True, default=120.0)
-    weak_rel_std: float = eqx.field(static=True, default=0.05)
-    residual_floor_px: float = eqx.field(static=True, default=0.1)
-    outline_error_px: float = eqx.field(static=True, default=0.1)
-    perspective_z: float = eqx.field(static=True, default=3.0)
-    perspective_factor: float = eqx.field(static=True, default=3.0)
+    undetermined: float = 1.0 / 3.0
+    min_focal_fraction: float = 0.5
+    max_fov_deg: float = 120.0
+    weak_rel_std: float = 0.05
+    residual_floor_px: float = 0.1
+    outline_error_px: float = 0.1
+    perspective_z: float = 3.0
+    perspective_factor: float = 3.0
