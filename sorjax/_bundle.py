@@ -43,7 +43,6 @@ intrinsics the views do not determine at all get an infinite variance (see
 
 from __future__ import annotations
 
-import collections
 import functools
 
 import equinox as eqx
@@ -55,20 +54,33 @@ from jaxtyping import Array, Float
 
 from ._camera import intrinsics_matrix, omega_matrix, omega_vector_from_intrinsics
 from ._camera import pixel_intrinsics as _pixel_intrinsics
-from ._field import DistanceField, curve_points, make_field, sample_weights
+from ._field import DistanceField, setup
 from ._homology import symmetry_feet, symmetry_residuals
-from ._solvers import NULL_RCOND, Solved, is_stale, polish, solvers, until_fresh
+from ._linear import linear_estimates
+from ._solvers import NULL_RCOND, Solved, is_stale, polish_traced, solvers, until_fresh_traced
+from .core._options import Options
 
 
 class BundleProblem(eqx.Module):
     """Everything the bundle's residuals need besides its parameters (normalised
     coordinates): per-view fields (stacked pytree), samples (V, N, 2) and their
-    weights (V, N), the known aspect ratio (NaN for free aspect)."""
+    weights (V, N), the known aspect ratio (NaN for free aspect).
+
+    A view left out (masked, :func:`make_problem`) keeps its slot with all weights
+    zero: its residuals are zero and its ``(theta, rho)`` have zero Jacobian columns
+    (the Gauss-Newton step's truncated SVD, the damped Levenberg-Marquardt step and
+    :func:`covariance`'s pseudo-inverse leave them alone; :func:`n_params` does not
+    count them)."""
 
     fields: DistanceField
     samples: Float[Array, "V N 2"]
     weights: Float[Array, "V N"]
     aspect: Float[Array, ""]
+
+    @property
+    def used(self):
+        """(V,) bool: the views with any sample of non-zero weight."""
+        return jnp.any(self.weights > 0, axis=-1)
 
 
 def unpack_intrinsics(k, aspect):
@@ -91,11 +103,14 @@ def unpack_intrinsics(k, aspect):
 
 
 def n_params(y, problem) -> Float[Array, ""]:
-    """The number of free parameters in ``y``: its size, less the ignored ``k[0]`` of
-    the padded chart when the aspect ratio is known (:func:`unpack_intrinsics`)."""
-    size = sum(x.size for x in jax.tree_util.tree_leaves(y))
-    padded = y[0].shape[-1] == 4
-    return size - (jnp.isfinite(problem.aspect).astype(jnp.float64) if padded else 0.0)
+    """The number of free parameters in ``y = (k, a)``: the intrinsics ``k`` (less the
+    ignored ``k[0]`` of the padded chart when the aspect ratio is known,
+    :func:`unpack_intrinsics`) and two per *used* view (a masked view's ``(theta,
+    rho)`` touch no residual)."""
+    nk = y[0].shape[-1]
+    padded = nk == 4
+    n_used = jnp.sum(problem.used).astype(jnp.float64)
+    return nk + 2.0 * n_used - (jnp.isfinite(problem.aspect).astype(jnp.float64) if padded else 0.0)
 
 
 def pack_intrinsics(fu, fv, u0, v0, free_aspect: bool):
@@ -114,11 +129,25 @@ def intrinsic_params(Kn, free_aspect: bool):
 
 
 def axis_params(l) -> Float[Array, "V 2"]:
-    """``(theta, rho)`` per view of homogeneous lines ``l`` (V, 3) (numpy, boundary):
-    ``l ~ (cos theta, sin theta, -rho)``."""
-    l = np.asarray(l, dtype=np.float64)
-    l = l / np.linalg.norm(l[:, :2], axis=1, keepdims=True)
-    return np.stack([np.arctan2(l[:, 1], l[:, 0]), -l[:, 2]], axis=1)
+    """``(theta, rho)`` per view of homogeneous lines ``l`` (V, 3):
+    ``l ~ (cos theta, sin theta, -rho)``.  numpy in, numpy out (boundary); a JAX array
+    (or tracer) in gives the same in ``jax.numpy``."""
+    xp = np if isinstance(l, np.ndarray) else jnp
+    l = xp.asarray(l, dtype=xp.float64)
+    l = l / xp.linalg.norm(l[:, :2], axis=1, keepdims=True)
+    return xp.stack([xp.arctan2(l[:, 1], l[:, 0]), -l[:, 2]], axis=1)
+
+
+def pack_seeds(seeds, seed_ok) -> Float[Array, "S 4"]:
+    """The padded chart ``(log fu, log fv, u0, v0)`` of intrinsic seeds (S, 4)
+    ``(fu, fv, u0, v0)`` (normalised units), traced; the seeds not ``seed_ok`` (and
+    any non-positive focal length) give finite junk, never used."""
+    seeds = jnp.asarray(seeds, jnp.float64)
+    fu, fv = seeds[..., 0], seeds[..., 1]
+    good = jnp.asarray(seed_ok, bool) & (fu > 0) & (fv > 0)
+    logs = [jnp.where(good, jnp.log(jnp.where(good, x, 1.0)), jnp.where(seed_ok, jnp.nan, 0.0)) for x in (fu, fv)]
+    rest = [jnp.where(seed_ok, seeds[..., i], 0.0) for i in (2, 3)]
+    return jnp.stack(logs + rest, axis=-1)
 
 
 def pole_polar_pairs(y, problem: BundleProblem):
@@ -173,12 +202,6 @@ def _hinted_residuals(y, args):
 _SOLVERS = solvers(rtol=1e-7, atol=1e-9)
 
 
-@jax.jit
-def _costs(ys, problem: BundleProblem):
-    """The cost of each of a stack of parameters ``ys`` (leading axis: the seeds)."""
-    return jax.vmap(lambda y: jnp.sum(residuals(y, problem) ** 2))(ys)
-
-
 @functools.partial(jax.jit, static_argnames=("max_steps", "method"))
 def solve(y0, problem: BundleProblem, max_steps: int = 200, method: str = "lm"):
     """Minimise the bundle's cost from ``y0`` with ``method``: "lm" (Levenberg-Marquardt),
@@ -225,7 +248,8 @@ def orthographic_cost(y, problem: BundleProblem, max_steps: int = 100):
     linearisation can be confident far from the truth under weak perspective).
 
     Closest points are searched near where they were at the start, and the solve is
-    repeated from its end should one of them leave its window (as in :func:`solve`)."""
+    repeated from its end should one of them leave its window (as in :func:`solve`;
+    traced: :func:`sorjax._solvers.until_fresh_traced`)."""
     k0, a0 = y
     k0 = jnp.asarray(k0)
     if k0.shape[0] == 3:  # known aspect, compact chart: pad it
@@ -233,9 +257,9 @@ def orthographic_cost(y, problem: BundleProblem, max_steps: int = 100):
 
     def once(z):
         z, cost, stale = _orthographic_solve(z, k0, problem, max_steps=max_steps)
-        return cost, z, 0, bool(stale)
+        return cost, z, 0, stale
 
-    return until_fresh(once, (k0[0] - k0[1], jnp.asarray(a0)))[0]
+    return until_fresh_traced(once, (k0[0] - k0[1], jnp.asarray(a0)))[0]
 
 
 def _orthographic_params(z, k0, problem: BundleProblem):
@@ -356,106 +380,138 @@ def _correlated_meat(G, r, feet, problem: BundleProblem, s2):
     return s2 * (G.T @ G + rho_1 * (C1 + C1.T) + 0.5 * rho_m * (Cm + Cm.T))
 
 
-def make_problem(points_n, n_samples: int, aspect=None, inliers=None) -> BundleProblem:
+def _placeholder_outline(m: int):
+    """A unit circle of ``m`` points: what a masked view's field is built on (its
+    own points may hold anything, NaN included), all its weights zero."""
+    t = jnp.arange(m) * (2.0 * jnp.pi / m)
+    return jnp.stack([jnp.cos(t), jnp.sin(t)], axis=-1)
+
+
+def make_problem(points_n, n_samples: int, aspect=None, inliers=None, used=None) -> BundleProblem:
     """The :class:`BundleProblem` of (V, M, 2) normalised outline points: fields,
-    ``n_samples`` samples per view, their corner weights times the optional (V, N)
-    0/1 ``inliers`` mask; ``aspect`` the known ``fu / fv`` or None (free).
+    ``n_samples`` samples per view (:func:`sorjax._field.setup`), their corner weights
+    times the optional (V, N) 0/1 ``inliers`` mask and the (V,) bool ``used`` mask (a
+    masked view keeps its slot: a placeholder field, all weights zero); ``aspect`` the
+    known ``fu / fv``, NaN or None (free).
 
-    Concrete inputs (numpy) only.  The last few problems are kept, keyed by the exact
-    bytes of the inputs: comparing estimators calls :func:`sorjax.calibrate` once per
-    method on the same outlines (five times a trial in Table 1), and each needs it; the
-    fields, samples and weights are shared by both aspect-ratio models."""
-    pts = np.ascontiguousarray(points_n, dtype=np.float64)
-    inl = None if inliers is None else np.ascontiguousarray(inliers, dtype=np.float64)
-    a = None if aspect is None else float(aspect)
-    geo_key = (pts.shape, pts.tobytes(), int(n_samples), None if inl is None else inl.tobytes())
-    key = geo_key + (a,)
-    hit = _cached(_PROBLEMS, key)
-    if hit is not None:
-        return hit
-    geometry = _cached(_GEOMETRY, geo_key)  # the same for either aspect-ratio model
-    if geometry is None:
-        fields, samples, weights = _setup(pts, n_samples)
-        if inl is not None:
-            weights = weights * inl
-        geometry = _keep(_GEOMETRY, geo_key, (fields, samples, weights))
-    return _keep(_PROBLEMS, key, BundleProblem(*geometry, jnp.asarray(np.nan if a is None else a)))
+    Pure (jit / vmap / grad); nothing is kept between calls: a caller that needs the
+    problem twice builds it once and passes it on."""
+    pts = jnp.asarray(points_n, jnp.float64)
+    V, M = pts.shape[:2]
+    used = jnp.ones(V, bool) if used is None else jnp.asarray(used, bool)
+    inl = jnp.ones((V, n_samples)) if inliers is None else jnp.asarray(inliers, jnp.float64)
+    a = jnp.asarray(jnp.nan if aspect is None else aspect, jnp.float64)
+    return _build_problem(pts, used, inl, a, n_samples)
 
 
-def _cached(cache: collections.OrderedDict, key):
-    hit = cache.get(key)
-    if hit is not None:
-        cache.move_to_end(key)
-    return hit
+@functools.partial(jax.jit, static_argnames=("n_samples",))
+def _build_problem(pts, used, inliers, aspect, n_samples: int) -> BundleProblem:
+    pts = jnp.where(used[:, None, None], pts, _placeholder_outline(pts.shape[1]))
+    fields, samples, weights = jax.vmap(lambda p: setup(p, n_samples))(pts)
+    weights = weights * inliers * used[:, None].astype(weights.dtype)
+    return BundleProblem(fields, samples, weights, aspect)
 
 
-def _keep(cache: collections.OrderedDict, key, value):
-    cache[key] = value
-    while len(cache) > _PROBLEM_CACHE_SIZE:
-        cache.popitem(last=False)
-    return value
+SEED_BATCH = 6  # the three linear methods' seeds, then the fallback spread (:func:`bundle_seeds`)
+FALLBACK_FOCALS = (2.0, 5.0, 12.0)  # normalised units: the spread of cameras tried with no linear seed
 
 
-_PROBLEMS: collections.OrderedDict = collections.OrderedDict()
-_GEOMETRY: collections.OrderedDict = collections.OrderedDict()
-_PROBLEM_CACHE_SIZE = 4
+@jax.jit
+def bundle_seeds(v_pix, l_pix, used, T, aspect):
+    """The bundle's intrinsic seeds (normalised units, :data:`SEED_BATCH` of them):
+    Methods IIa, IIb and I (:func:`sorjax._linear.linear_estimates`; IIb and I with
+    the known aspect ratio, 1 for free), projected onto a known aspect ratio
+    ``a = aspect`` (``fv = sqrt(fu fv / a)``, ``fu = a fv``; NaN: free), then the
+    fallback spread ``(a f, f, 0, 0)`` for f in :data:`FALLBACK_FOCALS`, valid only
+    where no linear seed is.
+
+    Returns ``(seeds (6, 4), seed_ok (6,))``; a linear seed is valid when its method
+    succeeded and its focal lengths are finite and positive."""
+    aspect = jnp.asarray(aspect, jnp.float64)
+    known = jnp.isfinite(aspect)
+    a = jnp.where(known, aspect, 1.0)
+    K, _, ok = linear_estimates(v_pix, l_pix, used, T, a)
+    Kn = T @ K
+    fu, fv, u0, v0 = Kn[:, 0, 0], Kn[:, 1, 1], Kn[:, 0, 2], Kn[:, 1, 2]
+    prod = fu * fv / a
+    fv_a = jnp.where(prod >= 0, jnp.sqrt(jnp.where(prod >= 0, prod, 0.0)), jnp.nan)
+    fu, fv = jnp.where(known, a * fv_a, fu), jnp.where(known, fv_a, fv)
+    lin = jnp.stack([fu, fv, u0, v0], axis=-1)
+    lin_ok = ok & jnp.all(jnp.isfinite(lin), axis=-1) & (fu > 0) & (fv > 0)
+    f = jnp.asarray(FALLBACK_FOCALS)
+    spread = jnp.stack([a * f, f, jnp.zeros_like(f), jnp.zeros_like(f)], axis=-1)
+    seeds = jnp.concatenate([jnp.where(lin_ok[:, None], lin, spread), spread])
+    seed_ok = jnp.concatenate([lin_ok, jnp.broadcast_to(~jnp.any(lin_ok), f.shape)])
+    return seeds, seed_ok
 
 
-SEED_BATCH = 3  # the linear methods give at most three seeds; the fallback spread three
-
-
-def fit_bundle(points_n, l_seeds_n, intrinsic_seeds, aspect, n_samples: int, max_steps: int = 200, inliers=None):
+def fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Options = Options()):
     """Rank the intrinsic seeds by their cost, polish the one of lowest cost to
     convergence (Gauss-Newton; Levenberg-Marquardt when that fails or ends above its
     start, accepted at its step limit when it is as good as stationary:
-    :data:`STATIONARY_SIGMAS`); should that not converge either, the next seed, and so on.
+    :data:`STATIONARY_SIGMAS`); should that not converge either, the next seed, and so
+    on.  Pure (jit / vmap): the ranking is one vmapped call, the seeds a
+    ``lax.while_loop``, the polish :func:`sorjax._solvers.polish_traced` with each
+    solve re-run while stale (:func:`sorjax._solvers.until_fresh_traced`).
 
     Args:
-        points_n: (V, M, 2) outlines in normalised coordinates.
-        l_seeds_n: (V, 3) per-view axes from the homology fits (normalised).
-        intrinsic_seeds: list of ``(fu, fv, u0, v0)`` in normalised units.
-        aspect: known aspect ratio ``fu / fv`` or None (free).
-        inliers: optional (V, N) 0/1 mask of the samples to use (the per-view robust
-            fits' ``Homology.inliers``); it multiplies the corner weights.
+        problem: the :class:`BundleProblem` (:func:`make_problem`).
+        l_seeds_n: (V, 3) per-view axes from the homology fits (normalised; a masked
+            view's row may hold anything).
+        seeds: (S, 4) intrinsic seeds ``(fu, fv, u0, v0)`` in normalised units.
+        seed_ok: (S,) bool, the seeds to try.
+        options: ``bundle_max_steps``, the step limit of each solve.
 
-    Returns ``(y, result, steps, residuals, problem)``; ``steps`` counts every solver
-    step taken.
-    """
-    problem = make_problem(points_n, n_samples, aspect, inliers)
-    a0 = axis_params(l_seeds_n)
-    # the padded chart for both aspect models (one compilation each solver)
-    starts = [(pack_intrinsics(fu, fv, u0, v0_, True), a0) for fu, fv, u0, v0_ in intrinsic_seeds]
-    total = 0
-    # one compiled ranking for any number of seeds: padded to a multiple of SEED_BATCH
-    padded = starts + [starts[0]] * (-len(starts) % SEED_BATCH)
-    costs = np.asarray(_costs(jax.tree_util.tree_map(lambda *a: np.stack(a), *padded), problem))[: len(starts)]
-    ranked = sorted((c if np.isfinite(c) else np.inf, i, y0) for i, (c, y0) in enumerate(zip(costs, starts)))
+    Returns ``(y, ok, steps, residuals)``: the padded-chart parameters ``y = (k (4,),
+    a (V, 2))``, whether the polish converged (bool), every solver step taken (int),
+    the (V N) residuals at ``y``.  Of the seeds tried, the one converged (else the one
+    of lowest cost) is returned."""
+    max_steps = options.bundle_max_steps
+    used = problem.used
+    l = jnp.where(used[:, None], jnp.asarray(l_seeds_n, jnp.float64), jnp.asarray([1.0, 0.0, 0.0]))
+    a0 = axis_params(l)
+    seed_ok = jnp.asarray(seed_ok, bool)
+    ks = pack_seeds(seeds, seed_ok)
+    costs = jax.vmap(lambda k: jnp.sum(residuals((k, a0), problem) ** 2))(ks)
+    costs = jnp.where(jnp.isfinite(costs), costs, jnp.inf)
+    S = ks.shape[0]
+    # the seeds to try first, by cost (ties: the first given); the others last
+    order = jnp.lexsort((jnp.arange(S), costs, ~seed_ok))
 
     def run(y, method):
         def once(y):
-            out = solve(y, problem, max_steps=max_steps, method=method)
-            return out, out[0], int(out[2]), bool(out[4])
+            y_end, res, n, r, stale = solve(y, problem, max_steps=max_steps, method=method)
+            return (res == optx.RESULTS.successful, r), y_end, n, stale
 
-        out, steps = until_fresh(once, y)
-        r = np.asarray(out[3])
-        return Solved(out[0], bool(out[1] == optx.RESULTS.successful), float(r @ r), steps, out[:4])
+        (ok, r), y_end, steps = until_fresh_traced(once, y)
+        return Solved(y_end, ok, jnp.sum(r**2), steps, r)
 
-    best = None
-    for cost0, _, y0 in ranked:  # the best seed first; the others only if it fails
-        final, steps = polish(run, y0, cost0)
-        total += steps
-        y, res, _, r = final.out
-        cost = final.cost
-        if not final.ok and np.isfinite(cost) and float(step_sigmas(y, problem)) < STATIONARY_SIGMAS:
-            res = optx.RESULTS.successful  # stopped by the step limit, but as good as stationary
-        ok = bool(res == optx.RESULTS.successful) and np.isfinite(cost)
-        key = (not ok, cost if np.isfinite(cost) else np.inf)
-        if best is None or key < best[0]:
-            best = (key, y, res, r)
-        if ok:
-            break
-    _, y, res, r = best
-    return y, res, total, r, problem
+    n_res = problem.weights.size
+
+    def cond(c):
+        i, done = c[0], c[1]
+        return (i < S) & ~done & seed_ok[order[jnp.minimum(i, S - 1)]]
+
+    def body(c):
+        i, _, have, best_bad, best_cost, best_y, best_r, total = c
+        j = order[i]
+        final, steps = polish_traced(run, (ks[j], a0), costs[j])
+        y, cost = final.y, final.cost
+        finite = jnp.isfinite(cost)
+        # stopped by the step limit, but as good as stationary
+        stationary = jax.lax.cond(~final.ok & finite, lambda: step_sigmas(y, problem) < STATIONARY_SIGMAS,
+                                  lambda: jnp.asarray(False))
+        ok = (final.ok | stationary) & finite
+        cost = jnp.where(finite, cost, jnp.inf)
+        better = ~have | (best_bad & ok) | ((best_bad == ~ok) & (cost < best_cost))
+        pick = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(better, a, b), new, old)  # noqa: E731
+        return (i + 1, ok, jnp.asarray(True), jnp.where(better, ~ok, best_bad), jnp.where(better, cost, best_cost),
+                pick(y, best_y), pick(final.out, best_r), total + steps)
+
+    init = (jnp.asarray(0, jnp.int32), jnp.asarray(False), jnp.asarray(False), jnp.asarray(True),
+            jnp.asarray(jnp.inf), (ks[order[0]], a0), jnp.full(n_res, jnp.nan), jnp.asarray(0, jnp.int32))
+    _, _, _, bad, _, y, r, total = jax.lax.while_loop(cond, body, init)
+    return y, ~bad, total, r
 
 
 # A solve that stops at its step limit still counts as converged when the Gauss-Newton
@@ -474,12 +530,93 @@ def step_sigmas(y, problem: BundleProblem):
     return covariance(y, problem, jnp.eye(3))[2]
 
 
+class BundleOut(eqx.Module):
+    """The bundle's estimate, all arrays (pixels unless said otherwise).
+
+    Attributes:
+        y: the padded-chart parameters ``(k (4,), a (V, 2))`` (normalised units).
+        K: (3, 3) the intrinsics.
+        omega: (3, 3) the image of the absolute conic ``K^-T K^-1``.
+        v_x, l_s: (V, 3) per-view vertex (unit) and axis (``a^2 + b^2 = 1``); NaN
+            for a masked view.
+        cov: (4, 4) covariance of ``(fu, fv, u0, v0)`` (px^2; inf / NaN where the
+            views do not determine an intrinsic, :func:`covariance`).
+        s2: the residual variance ``|r|^2 / (n - p)`` (px^2).
+        cost: the sum of squared residuals (px^2).
+        view_rms: (V,) each view's RMS residual over its ``N`` samples (NaN: masked).
+        steps: every solver step taken (int).
+        ok: the polish converged and K is finite (bool).
+        evidence: the cost (px^2) by which the best camera with no perspective fits
+            worse (:func:`orthographic_cost`).
+        n: the number of samples counted (the sum of the weights).
+    """
+
+    y: tuple
+    K: Float[Array, "3 3"]
+    omega: Float[Array, "3 3"]
+    v_x: Float[Array, "V 3"]
+    l_s: Float[Array, "V 3"]
+    cov: Float[Array, "4 4"]
+    s2: Float[Array, ""]
+    cost: Float[Array, ""]
+    view_rms: Float[Array, " V"]
+    steps: Array
+    ok: Array
+    evidence: Float[Array, ""]
+    n: Float[Array, ""]
+
+
+@jax.jit
+def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options: Options = Options()) -> BundleOut:
+    """The joint bundle, one pure function of arrays (jit / vmap over trials).
+
+    Args:
+        points_n: (V, M, 2) outline points in the joint normalised coordinates ``T``.
+        used: (V,) bool, the views to use (the others keep their slot, masked).
+        inliers: (V, N) 0/1, the samples each view's robust fit kept.
+        l_n: (V, 3) the per-view fits' axes (normalised): the seeds of ``(theta, rho)``.
+        seeds, seed_ok: (S, 4) intrinsic seeds ``(fu, fv, u0, v0)`` (normalised) and
+            which to try (:func:`bundle_seeds`).
+        aspect: known ``fu / fv`` (scalar), NaN for free.
+        T: (3, 3) the normalising similarity (``x_n = T x``).
+        options: :class:`sorjax.core.Options` (its static ``n_samples`` and
+            ``bundle_max_steps``; under ``jax.vmap`` pass it unbatched, ``in_axes=None``).
+
+    Returns a :class:`BundleOut`."""
+    used = jnp.asarray(used, bool)
+    T = jnp.asarray(T, jnp.float64)
+    problem = make_problem(points_n, options.n_samples, aspect, inliers, used)
+    y, ok, steps, r = fit_bundle(problem, l_n, seeds, seed_ok, options)
+    cov, s2, _ = covariance(y, problem, T)
+    K, omega, vx, ls = solution_in_pixels(y, problem, T)
+    scale = 1.0 / T[0, 0]
+    V = used.shape[0]
+    rv = r.reshape(V, -1) * scale
+    cost = jnp.sum(rv**2)
+    evidence = orthographic_cost(y, problem) * scale**2 - cost
+    nan = jnp.asarray(jnp.nan)
+    return BundleOut(
+        y=y, K=K, omega=omega,
+        v_x=jnp.where(used[:, None], vx, nan), l_s=jnp.where(used[:, None], ls, nan),
+        cov=cov, s2=s2 * scale**2, cost=cost,
+        view_rms=jnp.where(used, jnp.sqrt(jnp.mean(rv**2, axis=1)), nan),
+        steps=steps, ok=ok & jnp.all(jnp.isfinite(K)), evidence=evidence, n=jnp.sum(problem.weights),
+    )
+
+
 @functools.partial(jax.jit, static_argnames=("n_samples",))
-def _setup(points_n, n_samples: int):
-    fields = jax.vmap(make_field)(points_n)
-    samples = jax.vmap(lambda f: curve_points(f, n_samples))(fields)
-    weights = jax.vmap(lambda f: sample_weights(f, n_samples))(fields)
-    return fields, samples, weights
+def linearised_covariance(points_n, used, inliers, l_n, K, T, aspect, n_samples: int):
+    """Covariance of ``(fu, fv, u0, v0)`` per px^2 of symmetry residual for an estimate
+    ``K`` (px): :func:`covariance` at ``K`` with the per-view axes ``l_n`` (normalised)
+    -- how well the used views determine the intrinsics whatever the estimator
+    (infinite where they don't).  Pure; arguments as :func:`bundle_estimate`'s."""
+    used = jnp.asarray(used, bool)
+    problem = make_problem(points_n, n_samples, aspect, inliers, used)
+    Kn = T @ K
+    k = pack_seeds(jnp.stack([Kn[0, 0], Kn[1, 1], Kn[0, 2], Kn[1, 2]])[None], jnp.ones(1, bool))[0]
+    l = jnp.where(used[:, None], jnp.asarray(l_n, jnp.float64), jnp.asarray([1.0, 0.0, 0.0]))
+    cov, s2, _ = covariance((k, axis_params(l)), problem, T)
+    return cov / (jnp.maximum(s2, 1e-300) / T[0, 0] ** 2)
 
 
 import jax.flatten_util  # noqa: E402  (registers the submodule used above)

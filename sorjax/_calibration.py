@@ -17,9 +17,9 @@ from jaxtyping import Array, Float, Int
 
 from ._camera import normalising_transform, transform_points
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
-from ._bundle import (axis_params, covariance, fit_bundle, intrinsic_params, make_problem, orthographic_cost,
-                      solution_in_pixels)
-from ._linear import linear_in_pixels
+from ._bundle import bundle_estimate, bundle_seeds, linearised_covariance
+from ._linear import linear_estimate, linear_in_pixels
+from .core._options import Options
 from ._outline import DEFAULT_POINTS, as_outlines
 from .core._result import RESULTS
 
@@ -142,12 +142,19 @@ def _check_method(method: str, aspect_ratio):
 
 def _linear_once(homologies, method: str, T: np.ndarray, a: float, weights=None):
     TA = T @ np.diag([1.0 / a, 1.0, 1.0])
-    v = np.stack([np.asarray(h.v_x) for h in homologies])
-    l = np.stack([np.asarray(h.l_s) for h in homologies])
+    v, l = _stacked_homologies(homologies)
     K, omega, ok = linear_in_pixels(v, l, TA, weights, method=method)
+    return K, omega, _linear_code(ok, method)
+
+
+def _stacked_homologies(homologies):
+    return (np.stack([np.asarray(h.v_x) for h in homologies]), np.stack([np.asarray(h.l_s) for h in homologies]))
+
+
+def _linear_code(ok, method: str):
     if bool(ok):
-        return K, omega, RESULTS.successful
-    return K, omega, RESULTS.degenerate if method == "I" else RESULTS.not_positive_definite
+        return RESULTS.successful
+    return RESULTS.degenerate if method == "I" else RESULTS.not_positive_definite
 
 
 def conditioning_from_K(K, a: float = 1.0) -> np.ndarray:
@@ -171,18 +178,10 @@ def linear_calibration(homologies, method: str, T: np.ndarray, aspect_ratio=None
     normalisation; it lowered IIb's focal error by about a quarter on the two-sphere
     scene at sigma = 2 px)."""
     a = 1.0 if aspect_ratio is None else float(aspect_ratio)
-    K, omega, code = _linear_once(homologies, method, T, a, weights)
-    if method == "I":
-        return K, omega, code
-    guess = K if bool(code == RESULTS.successful) else None
-    if guess is None:
-        K_i, _, code_i = _linear_once(homologies, "I", T, a)
-        guess = K_i if bool(code_i == RESULTS.successful) else None
-    if guess is not None and np.all(np.isfinite(np.asarray(guess))):
-        K2, omega2, code2 = _linear_once(homologies, method, conditioning_from_K(guess, a), a, weights)
-        if bool(code2 == RESULTS.successful) or not bool(code == RESULTS.successful):
-            return K2, omega2, code2
-    return K, omega, code
+    v, l = _stacked_homologies(homologies)
+    # the pure core (sorjax._linear.linear_estimate); host conversion only here
+    K, omega, ok = linear_estimate(v, l, np.ones(len(v), bool), np.asarray(T), a, method=method, weights=weights)
+    return K, omega, _linear_code(ok, method)
 
 
 def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples):
@@ -197,35 +196,18 @@ def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples):
     standard error, ``evidence = (delta_px2, n)`` the cost (px^2) by which the best
     camera with no perspective fits worse (:func:`sorjax._bundle.orthographic_cost`)
     and the number of samples it is summed over."""
-    scale = 1.0 / T[0, 0]
-    a = 1.0 if aspect_ratio is None else float(aspect_ratio)
-    seeds = []
-    for m in ("IIa", "IIb", "I"):
-        K, _, code = linear_calibration(homologies, m, T, None if m == "IIa" else a)
-        if bool(code == RESULTS.successful):
-            Kn = T @ np.asarray(K)
-            fu, fv = Kn[0, 0], Kn[1, 1]
-            if aspect_ratio is not None:
-                fv = np.sqrt(fu * fv / a)
-                fu = a * fv
-            if np.all(np.isfinite([fu, fv, Kn[0, 2], Kn[1, 2]])) and fu > 0 and fv > 0:
-                seeds.append((fu, fv, Kn[0, 2], Kn[1, 2]))
-    if not seeds:
-        seeds = [(a * f, f, 0.0, 0.0) for f in (2.0, 5.0, 12.0)]
-    pts_n = _normalised_points(outs, T)
-    l_n = _axes_normalised(homologies, T)
-    y, res, steps, r, problem = fit_bundle(pts_n, l_n, seeds, aspect_ratio, n_samples,
-                                           inliers=_inlier_mask(homologies, n_samples))
-    cov, s2, _ = covariance(y, problem, T)
-    K, omega, vx, ls = solution_in_pixels(y, problem, T)
-    ok = bool(res == optx.RESULTS.successful) and bool(np.all(np.isfinite(np.asarray(K))))
-    code = RESULTS.successful if ok else RESULTS.not_converged
-    rv = np.asarray(r).reshape(len(outs), -1) * scale
-    view_rms = jnp.asarray(np.sqrt(np.mean(rv**2, axis=1)))
-    cost = float(np.sum(rv**2))
-    evidence = (float(orthographic_cost(y, problem)) * scale**2 - cost, float(np.sum(np.asarray(problem.weights))))
-    cost = jnp.asarray(cost)
-    return K, omega, code, cov, cost, view_rms, steps, vx, ls, float(np.sqrt(s2)) * scale, evidence
+    v, l = _stacked_homologies(homologies)
+    used = np.ones(len(outs), bool)
+    aspect = np.nan if aspect_ratio is None else float(aspect_ratio)
+    # the pure core (sorjax._bundle): seeds, fit, covariance, evidence in one program each
+    seeds, seed_ok = bundle_seeds(v, l, used, np.asarray(T), aspect)
+    out = bundle_estimate(_normalised_points(outs, T), used, _inlier_mask(homologies, n_samples),
+                          _axes_normalised(homologies, T), seeds, seed_ok, aspect, np.asarray(T),
+                          Options(n_samples=n_samples))
+    code = RESULTS.successful if bool(out.ok) else RESULTS.not_converged
+    evidence = (float(out.evidence), float(out.n))
+    return (out.K, out.omega, code, out.cov, out.cost, out.view_rms, int(out.steps), out.v_x, out.l_s,
+            float(np.sqrt(out.s2)), evidence)
 
 
 def _linearised_covariance(outs, homologies, K, T, aspect_ratio, n_samples):
@@ -233,12 +215,10 @@ def _linearised_covariance(outs, homologies, K, T, aspect_ratio, n_samples):
     method's estimate ``K``: the bundle's linearisation (:func:`sorjax._bundle.covariance`)
     at ``K`` with the per-view fits' axes.  It measures how well these views
     determine the intrinsics whatever the estimator (infinite where they don't)."""
-    scale = 1.0 / T[0, 0]
-    problem = make_problem(_normalised_points(outs, T), n_samples, aspect_ratio, _inlier_mask(homologies, n_samples))
-    # the padded chart (sorjax._bundle.unpack_intrinsics): the bundle's compiled covariance
-    y = (intrinsic_params(T @ np.asarray(K), True), axis_params(_axes_normalised(homologies, T)))
-    cov, s2, _ = covariance(y, problem, jnp.asarray(T))
-    return np.asarray(cov) / (max(float(s2), 1e-300) * scale**2)
+    cov = linearised_covariance(_normalised_points(outs, T), np.ones(len(outs), bool), _inlier_mask(homologies, n_samples),
+                                _axes_normalised(homologies, T), np.asarray(K), np.asarray(T),
+                                np.nan if aspect_ratio is None else float(aspect_ratio), n_samples)
+    return np.asarray(cov)
 
 
 def _perspective(evidence, s_px: float, outline_error: float):

@@ -85,7 +85,7 @@ def method_ii(v, l, *, unit_aspect: bool, weights=None):
 
 
 @functools.partial(jax.jit, static_argnames=("weighted",))
-def method_i(v, l, *, finite_tol: float = 1e-9, weighted: bool = True):
+def method_i(v, l, *, finite_tol: float = 1e-9, weighted: bool = True, used=None):
     """Method I (unit aspect ratio, zero skew).
 
     ``weighted=False`` is eq. 23 as printed, the plain mean of the per-view
@@ -100,13 +100,20 @@ def method_i(v, l, *, finite_tol: float = 1e-9, weighted: bool = True):
     moved such a view's ``f_i`` by a percent, and the plain mean with it.  Both agree
     exactly on exact homologies.
 
+    ``used`` (V,) bool, optional: the views to use (a masked view gets zero weight,
+    whatever its homology holds).
+
     Returns ``(f, f, u0, v0, ok)`` in the coordinates of ``v, l``.  ``ok`` is False when
     fewer than two views have a finite vertex or their lines ``l_x`` are parallel."""
+    if used is not None:
+        v, l = masked_homologies(v, l, used)
     v, l = _unit(v), _unit(l)
     l1, l2 = l[:, 0], l[:, 1]
     v1, v2, v3 = v[:, 0], v[:, 1], v[:, 2]
     lx = jnp.stack([l2 * v3, -l1 * v3, l1 * v2 - l2 * v1], -1)
     finite = jnp.abs(v3) > finite_tol
+    if used is not None:
+        finite = finite & jnp.asarray(used, bool)
     nrm = jnp.linalg.norm(lx[:, :2], axis=-1)
     wgt = jnp.where(finite & (nrm > 0), 1.0, 0.0)
     lx = lx / jnp.where(nrm > 0, nrm, 1.0)[:, None]
@@ -148,3 +155,90 @@ def linear_in_pixels(v_pix, l_pix, TA, weights=None, *, method: str):
     K = jnp.linalg.solve(TA, intrinsics_matrix(fu, fv, u0, v0))
     omega = TA.T @ omega_matrix(omega_vector_from_intrinsics(fu, fv, u0, v0)) @ TA
     return K, omega, ok
+
+
+# ------------------------------------------------------------------ masked, pure
+#
+# The functional core's linear methods: views are masked, never removed (a (V,) bool
+# ``used``).  A masked view's homology may hold anything (NaN included): it is replaced
+# by a harmless placeholder before any arithmetic, and its rows / weight are zero, so
+# the estimate equals the one of the used views alone.
+
+_PLACEHOLDER_V = (0.0, 0.0, 1.0)
+_PLACEHOLDER_L = (1.0, 0.0, 0.0)
+LINEAR_METHODS = ("IIa", "IIb", "I")  # the order of :func:`linear_estimates` (and of the bundle's seeds)
+
+
+def masked_homologies(v, l, used):
+    """``(v, l)`` (V, 3) with the masked views' rows replaced by a finite placeholder."""
+    used = jnp.asarray(used, bool)[:, None]
+    v = jnp.where(used, v, jnp.asarray(_PLACEHOLDER_V, dtype=jnp.result_type(v, jnp.float64)))
+    l = jnp.where(used, l, jnp.asarray(_PLACEHOLDER_L, dtype=jnp.result_type(l, jnp.float64)))
+    return v, l
+
+
+def _aspect_map(aspect):
+    """``A = diag(1/a, 1, 1)`` (eqs. 24-26)."""
+    a = jnp.asarray(aspect, jnp.float64)
+    return jnp.diag(jnp.stack([1.0 / a, jnp.ones_like(a), jnp.ones_like(a)]))
+
+
+def conditioning_from_K(K, aspect=1.0):
+    """The isotropic normalisation ``T = K'^-1`` for an estimate ``K`` (``K' = A K``,
+    ``A = diag(1/a, 1, 1)``): there omega is close to the identity, the best
+    conditioning for Method II's linear system.  Traced."""
+    s, cx, cy = K[1, 1], K[0, 2] / aspect, K[1, 2]
+    z, o = jnp.zeros_like(s), jnp.ones_like(s)
+    return jnp.stack([jnp.stack([o / s, z, -cx / s]), jnp.stack([z, o / s, -cy / s]), jnp.stack([z, z, o])])
+
+
+def _once(v, l, used, TA, method: str, weights):
+    """One pass of ``method`` in the coordinates ``x' = TA x``: ``(K, omega, ok)`` px."""
+    vn = v @ TA.T
+    ln = l @ jnp.linalg.inv(TA)
+    if method == "I":
+        fu, fv, u0, v0, ok = method_i(vn, ln, used=used)
+    else:
+        w = jnp.asarray(used, jnp.float64) * (1.0 if weights is None else jnp.asarray(weights, jnp.float64))
+        fu, fv, u0, v0, ok, _ = method_ii(vn, ln, unit_aspect=(method == "IIb"), weights=w)
+    K = jnp.linalg.solve(TA, intrinsics_matrix(fu, fv, u0, v0))
+    omega = TA.T @ omega_matrix(omega_vector_from_intrinsics(fu, fv, u0, v0)) @ TA
+    return K, omega, ok
+
+
+@functools.partial(jax.jit, static_argnames=("method",))
+def linear_estimate(v_pix, l_pix, used, T, aspect=1.0, *, method: str, weights=None):
+    """``method`` ("I", "IIa" or "IIb") on the used views' pixel homologies, with the
+    two-pass conditioning of :func:`sorjax._calibration.linear_calibration`: solved in
+    the coordinates ``T A`` (``T`` the joint normalising similarity, ``A = diag(1/a,
+    1, 1)`` the aspect map; ``aspect`` 1 for unit), and for Method II again in the
+    coordinates normalised by that first estimate -- or by Method I's when the first is
+    not positive definite -- the second kept where it succeeds or the first failed.
+
+    Pure (jit / vmap / grad): ``v_pix, l_pix`` (V, 3), ``used`` (V,) bool, ``T`` (3, 3),
+    ``aspect`` a scalar (1.0 for unit; ignored by IIa, which estimates it), optional
+    per-view ``weights`` (V,) for Method II.  Returns ``(K, omega, ok)`` in pixels;
+    ``ok`` False: Method I degenerate, or omega not positive definite (Method II)."""
+    used = jnp.asarray(used, bool)
+    v, l = masked_homologies(jnp.asarray(v_pix, jnp.float64), jnp.asarray(l_pix, jnp.float64), used)
+    a = jnp.asarray(1.0 if method == "IIa" else aspect, jnp.float64)
+    A = _aspect_map(a)
+    K1, om1, ok1 = _once(v, l, used, T @ A, method, weights)
+    if method == "I":
+        return K1, om1, ok1
+    KI, _, okI = _once(v, l, used, T @ A, "I", None)
+    guess = jnp.where(ok1, K1, KI)
+    have = (ok1 | okI) & jnp.all(jnp.isfinite(guess))
+    T2 = conditioning_from_K(jnp.where(have, guess, jnp.eye(3)), a)
+    K2, om2, ok2 = _once(v, l, used, T2 @ A, method, weights)
+    second = have & (ok2 | ~ok1)
+    return jnp.where(second, K2, K1), jnp.where(second, om2, om1), jnp.where(second, ok2, ok1)
+
+
+@jax.jit
+def linear_estimates(v_pix, l_pix, used, T, aspect=1.0):
+    """The three methods of :data:`LINEAR_METHODS` ("IIa", "IIb", "I") in one call:
+    ``(K (3, 3, 3), omega (3, 3, 3), ok (3,))`` px, stacked in that order (IIa with a
+    free aspect ratio, IIb and I with ``aspect``)."""
+    outs = [linear_estimate(v_pix, l_pix, used, T, aspect, method=m) for m in LINEAR_METHODS]
+    return tuple(jnp.stack(x) for x in zip(*outs))

@@ -34,7 +34,7 @@ from jaxtyping import Array, Float
 
 from ._bundle import BundleProblem, axis_params, intrinsic_params, residuals, unpack_intrinsics
 from ._camera import normalising_transform, pixel_intrinsics, transform_points
-from ._field import curve, curve_points, make_field, sample_weights
+from ._field import curve, setup
 from ._outline import DEFAULT_POINTS, make_outline
 
 
@@ -71,8 +71,7 @@ def _jacobians(y0, pn, normals, weights, aspect, n_samples: int):
 
     def R(flat, n):
         p = pn + n[..., None] * normals
-        fields = jax.vmap(make_field)(p)
-        samples = jax.vmap(lambda f: curve_points(f, n_samples))(fields)
+        fields, samples, _ = jax.vmap(lambda q: setup(q, n_samples))(p)  # weights: held at the unperturbed ones
         prob = BundleProblem(fields, samples, weights, aspect)
         return residuals(unravel(flat), prob)
 
@@ -83,10 +82,10 @@ def _jacobians(y0, pn, normals, weights, aspect, n_samples: int):
 @functools.partial(jax.jit, static_argnames=("n_samples",))
 def _geometry(pn, n_samples: int):
     """Unit tangents at the knots and the sample weights of each view's field."""
-    fields = jax.vmap(make_field)(pn)
+    fields, _, weights = jax.vmap(lambda p: setup(p, n_samples))(pn)
     m = pn.shape[1]
     tangents = jax.vmap(lambda f: jax.vmap(lambda t: curve(f, t)[1])(jnp.arange(m, dtype=jnp.float64)))(fields)
-    return tangents, jax.vmap(lambda f: sample_weights(f, n_samples))(fields)
+    return tangents, weights
 
 
 @jax.jit
