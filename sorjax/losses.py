@@ -24,25 +24,26 @@ The bundle's residuals for V views, with ``l_s = omega v_x`` built in::
     r = losses.bundle_residuals(jnp.array([fu, fv, u0, v0]), v_x, samples, fields)  # (V, 100)
 
 and :func:`calibrated_intrinsics` re-solves the bundle from a :class:`Calibration`
-with implicit differentiation, so ``jax.grad`` / ``jax.jacobian`` of the intrinsics
-with respect to the outline points works (sensitivity studies).
+(or a :class:`BundleStart` of arrays, to ``jax.vmap`` over trials) with implicit
+differentiation, so ``jax.grad`` / ``jax.jacobian`` of the intrinsics with respect to
+the outline points works (sensitivity studies).
 """
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from ._bundle import BundleProblem, axis_params, intrinsic_params, residuals, unpack_intrinsics
 from ._camera import normalising_transform, omega_matrix, omega_vector_from_intrinsics, pixel_intrinsics
-from ._field import DistanceField, curve_points, sample_weights, signed_distance, signed_distances
+from ._field import DistanceField, curve_points, sample_weights, setup, signed_distance, signed_distances
 from ._field import make_field as _make_field
 from ._homology import homology_matrix, symmetry_residuals, transfer
 
 __all__ = [
+    "BundleStart",
     "DistanceField",
     "bundle_residuals",
     "calibrated_intrinsics",
@@ -86,28 +87,109 @@ def bundle_residuals(
 
 
 _TIGHT = optx.LevenbergMarquardt(rtol=1e-11, atol=1e-13)
+_POLISH = optx.GaussNewton(rtol=1e-13, atol=1e-15)
+_POLISH_STEPS = 6
 
 
-def calibrated_intrinsics(points: Float[Array, "V M 2"], calibration, n_samples: int = 100) -> Float[Array, "4"]:
+class BundleStart(eqx.Module):
+    """Where :func:`calibrated_intrinsics` starts its solve, as arrays (pixels): ``K``
+    (3, 3, zero skew) and one axis ``l_s`` (V, 3) per view, with the aspect-ratio model
+    (``aspect_ratio``: the known ``fu / fv``, or None to estimate it; static, so it
+    selects the compiled program).  Stack starts over trials (``jax.tree.map(lambda *x:
+    jnp.stack(x), *starts)``) and ``jax.vmap`` over them; a :class:`sorjax.Calibration`
+    converts by :meth:`of`."""
+
+    K: Float[Array, "3 3"]
+    l_s: Float[Array, "V 3"]
+    aspect_ratio: float | None = eqx.field(static=True, default=None)
+
+    @classmethod
+    def of(cls, calibration) -> "BundleStart":
+        """The start a :class:`sorjax.Calibration` holds: its ``K``, ``l_s`` and
+        ``aspect_ratio`` (its ``l_s`` rows are those of the views it used)."""
+        a = calibration.aspect_ratio
+        return cls(jnp.asarray(calibration.K, jnp.float64), jnp.asarray(calibration.l_s, jnp.float64),
+                   None if a is None else float(a))
+
+
+def _chart_intrinsics(k, aspect):
+    """``(fu, fv, u0, v0)`` of the chart ``k = (log fu, log fv, u0, v0)`` (free aspect)
+    or ``(log fv, u0, v0)`` with ``fu = aspect fv``."""
+    if k.shape[-1] == 4:
+        return jnp.exp(k[0]), jnp.exp(k[1]), k[2], k[3]
+    fv = jnp.exp(k[0])
+    return aspect * fv, fv, k[1], k[2]
+
+
+def _chart_residuals(y, args) -> Float[Array, " VN"]:
+    """The bundle's residuals (normalised units) in its solver chart ``y = (k, a)``:
+    intrinsics ``k`` (:func:`_chart_intrinsics`) and per view ``a = (theta, rho)``,
+    ``l_s = (cos theta, sin theta, -rho)``, ``v_x = omega^-1 l_s`` (the chart of
+    :mod:`sorjax._bundle`, kept here so that this public loss stands on its own)."""
+    k, a = y
+    fields, samples, weights, aspect = args
+    omega = omega_matrix(omega_vector_from_intrinsics(*_chart_intrinsics(k, aspect)))
+    l = jnp.stack([jnp.cos(a[:, 0]), jnp.sin(a[:, 0]), -a[:, 1]], axis=-1)
+    v = jnp.linalg.solve(omega, l.T).T
+    v = v / jnp.linalg.norm(v, axis=-1, keepdims=True)
+    return jax.vmap(symmetry_residuals)(v, l, samples, fields, weights).reshape(-1)
+
+
+def _start_chart(T, start: BundleStart, n_views: int):
+    """The solver chart's ``y0`` of ``start`` in the coordinates ``x_n = T x``."""
+    Kn = T @ start.K
+    if start.aspect_ratio is None:
+        k0 = jnp.stack([jnp.log(Kn[0, 0]), jnp.log(Kn[1, 1]), Kn[0, 2], Kn[1, 2]])
+    else:
+        k0 = jnp.stack([jnp.log(Kn[1, 1]), Kn[0, 2], Kn[1, 2]])
+    l = start.l_s @ jnp.linalg.inv(T)  # lines map by T^-T
+    l = l / jnp.linalg.norm(l[:, :2], axis=-1, keepdims=True)
+    a0 = jnp.stack([jnp.arctan2(l[:, 1], l[:, 0]), -l[:, 2]], axis=-1)
+    if a0.shape[0] != n_views:
+        raise ValueError(f"the start has {a0.shape[0]} axes l_s for {n_views} outlines")
+    return k0, a0
+
+
+def calibrated_intrinsics(
+    points: Float[Array, "V M 2"], start, n_samples: int = 100, max_steps: int = 200
+) -> Float[Array, "4"]:
     """``(fu, fv, u0, v0)`` in pixels from re-solving the bundle on ``points``
     (V outlines, M evenly spaced pixel points each, e.g. the ``make_outline`` points the
-    calibration used), starting at ``calibration``'s estimate (its K and vertices) and
-    with its aspect-ratio model.  Differentiable in ``points`` by implicit
+    calibration used), with ``n_samples`` samples per outline.
+
+    ``start``: a :class:`sorjax.Calibration` (its K, axes and aspect-ratio model; when
+    it dropped views and ``points`` holds all of them, the views it used are taken) or
+    a :class:`BundleStart` of arrays, which ``jax.vmap`` maps over trials::
+
+        starts = jax.tree.map(lambda *x: jnp.stack(x), *[BundleStart.of(c) for c in cals])
+        f = jax.jit(jax.vmap(lambda p, s: calibrated_intrinsics(p, s, 40)))
+        k = f(points, starts)                     # points (trials, V, M, 2) -> (trials, 4)
+
+    Pure (jit / vmap / grad clean).  Differentiable in ``points`` by implicit
     differentiation of the optimum (optimistix ``ImplicitAdjoint``); the coordinate
-    normalisation and the starting point are constants."""
-    pts = np.asarray(jax.lax.stop_gradient(points))
-    T = normalising_transform(pts.reshape(-1, 2))
-    Tj = jnp.asarray(T)
-    pn = points @ Tj[:2, :2].T + Tj[:2, 2]
-    fields = jax.vmap(_make_field)(pn)
-    samples = jax.vmap(lambda f: curve_points(f, n_samples))(fields)
-    weights = jax.vmap(lambda f: sample_weights(f, n_samples))(fields)
-    a = calibration.aspect_ratio
-    problem = BundleProblem(fields, samples, weights, jnp.asarray(np.nan if a is None else a))
-    k0 = intrinsic_params(T @ np.asarray(calibration.K), a is None)
-    a0 = axis_params(np.asarray(calibration.l_s) @ np.linalg.inv(T))  # lines map by T^-T
+    normalisation (computed from ``points`` under ``stop_gradient``) and the start are
+    constants.  The solve is Levenberg-Marquardt to a relative step of 1e-11 within
+    ``max_steps``; it does not raise when it runs out of steps (start it at a
+    calibration's estimate, which is near the optimum)."""
+    if not isinstance(start, BundleStart):
+        used = tuple(getattr(start, "used", ()))
+        start = BundleStart.of(start)
+        if used and len(used) == start.l_s.shape[0] and len(used) < points.shape[0]:
+            points = jnp.asarray(points)[jnp.asarray(used)]
+    points = jnp.asarray(points, dtype=jnp.float64)
+    T = jax.lax.stop_gradient(normalising_transform(jax.lax.stop_gradient(points)))
+    pn = points @ T[:2, :2].T + T[:2, 2]
+    fields, samples, weights = jax.vmap(lambda p: setup(p, n_samples))(pn)
+    a = start.aspect_ratio
+    y0 = jax.lax.stop_gradient(_start_chart(T, start, points.shape[0]))
+    args = (fields, samples, weights, jnp.asarray(1.0 if a is None else a, jnp.float64))
+    sol = optx.least_squares(_chart_residuals, _TIGHT, y0, args=args, max_steps=max_steps, throw=False)
+    # Levenberg-Marquardt may stop on a step its damping shrank (~1e-9 short of the
+    # optimum); a few undamped Gauss-Newton steps settle it to rounding, which finite
+    # differences of a single outline point (1e-4 px) need.  Gradients: implicit, at
+    # this optimum (the first solve's output is only a start).
     sol = optx.least_squares(
-        residuals, _TIGHT, (k0, a0), args=problem, max_steps=200, throw=False,
-        adjoint=optx.ImplicitAdjoint(),
+        _chart_residuals, _POLISH, jax.lax.stop_gradient(sol.value), args=args, max_steps=_POLISH_STEPS,
+        throw=False, adjoint=optx.ImplicitAdjoint(),
     )
-    return pixel_intrinsics(T, *unpack_intrinsics(sol.value[0], problem.aspect))
+    return pixel_intrinsics(T, *_chart_intrinsics(sol.value[0], args[3]))

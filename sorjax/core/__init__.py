@@ -13,3 +13,4 @@ messages.
 
 from ._options import Options as Options
 from ._prepare import Views as Views, joint_transform as joint_transform, prepare_views as prepare_views
+from ._shard import TrialSharder as TrialSharder, sharded_vmap as sharded_vmap
