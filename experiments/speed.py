@@ -204,8 +204,9 @@ def baseline_trial(outs, starts, n_samples=100):
 def compare_baseline(n: int):
     import sorjax
     from sorjax import scenes
-    from sorjax._camera import normalising_transform, transform_points
-    from sorjax._homology import bitangent_candidates, conic_candidates, mirror_candidates, _view_setup
+    from sorjax._camera import normalising_transform
+    from sorjax.core import prepare_views
+    from sorjax.core._viewfit import automatic_starts
     from sorjax._outline import make_outline
     import jax.numpy as jnp
 
@@ -216,9 +217,9 @@ def compare_baseline(n: int):
     def starts_of(o):  # the same automatic candidates as sorjax's, in pixels (not timed)
         pts = np.asarray(make_outline(o).points)
         T = normalising_transform(pts)
-        pn = np.asarray(transform_points(T, pts))
-        _, samples, _ = _view_setup(jnp.asarray(pn), 100)
-        cands = bitangent_candidates(pn) + mirror_candidates(pn, samples) + conic_candidates(pn)
+        views = prepare_views(jnp.asarray(pts)[None], 100)
+        vs, ls, valid = (np.asarray(a) for a in automatic_starts(views.points[0], views.samples[0]))
+        cands = list(zip(vs[valid], ls[valid]))
         return [(np.linalg.solve(T, v), T.T @ l) for v, l in cands]
 
     starts = [[starts_of(o) for o in outs] for outs in trials]

@@ -34,33 +34,25 @@ Initialisation is automatic (the paper picked bitangents by hand):
 * for a nearly conic outline (a bowl from above), the pole-polar pairs of its
   best-fitting conic, each an exact symmetry of the conic;
 
-every candidate is refined by Levenberg-Marquardt (optimistix) and the one with the
-lowest cost wins.
+every candidate is screened by a few Levenberg-Marquardt steps (optimistix) and the one
+with the lowest cost is polished.  The fit itself is the pure, jit / vmap-able
+:func:`sorjax.core._viewfit.fit_view` (a fixed-size set of starts, robust trimming as a
+fixed number of masked rounds); :func:`fit_homology` is its shell: validation, then one
+jitted call, then a :class:`Homology`.
 """
 
 from __future__ import annotations
 
 import functools
 
-import cv2
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
-from ._camera import normalising_transform, transform_points
-from ._field import DistanceField, closest_parameter, curve_points, make_field, sample_weights, signed_distances
+from ._field import DistanceField, closest_parameter, signed_distances
 from ._outline import DEFAULT_POINTS, make_outline, perimeter
-from ._solvers import Solved, is_stale, polish, solvers, until_fresh
-
-DEFAULT_SAMPLES = 100
-INFINITY_Z = 3.0
-CONIC_RATIO = 1.5
-CONIC_FLOOR_PX = 1e-3
-_GRID_DIRECTIONS = 48
-_GRID_OFFSETS = (-0.3, -0.15, 0.0, 0.15, 0.3)
 
 
 class Homology(eqx.Module):
@@ -113,7 +105,7 @@ class Homology(eqx.Module):
     @property
     def v_x_at_infinity(self) -> bool:
         """``v_x`` is at infinity as far as this outline can tell: within
-        ``INFINITY_Z`` (3) standard errors of the line at infinity, or so far away
+        ``Options().infinity_z`` (3) standard errors of the line at infinity, or so far away
         (``|v_3| < 1e-9`` of the unit vertex in pixels) that no noise-free fit could
         place it better.  The camera then looks straight at the revolution axis (the
         outline has skew or mirror symmetry; paper, Section 6): the view constrains
@@ -125,14 +117,15 @@ class Homology(eqx.Module):
         when the joint estimate cannot fix the focal length either."""
         if abs(float(np.asarray(self.v_x)[2])) < 1e-9:
             return True
-        return self.infinity_z is not None and bool(self.infinity_z < INFINITY_Z)
+        return self.infinity_z is not None and bool(self.infinity_z < Options().infinity_z)
 
     @property
     def is_conic(self) -> bool:
         """The outline is explained by a conic about as well as by this homology
-        (``conic_rms <= CONIC_RATIO * rms + CONIC_FLOOR_PX``): its homology is not
-        determined, so the view says nothing about the camera."""
-        return bool(self.conic_rms <= CONIC_RATIO * self.rms + CONIC_FLOOR_PX)
+        (``conic_rms <= conic_ratio * rms + conic_floor_px``, :class:`sorjax.core.Options`):
+        its homology is not determined, so the view says nothing about the camera."""
+        o = Options()
+        return bool(self.conic_rms <= o.conic_ratio * self.rms + o.conic_floor_px)
 
 
 # ---------------------------------------------------------------------------- maths
@@ -173,371 +166,25 @@ def symmetry_feet(v: Float[Array, "3"], l: Float[Array, "3"], samples: Float[Arr
     return jax.vmap(closest_parameter, in_axes=(None, 0))(field, transfer(homology_matrix(v, l), samples))
 
 
-def _tangent_basis(v0: np.ndarray) -> np.ndarray:
-    """Orthonormal (3, 2) basis of the plane orthogonal to the unit vector ``v0``."""
-    a = np.eye(3)[int(np.argmin(np.abs(v0)))]
-    e1 = np.cross(v0, a)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(v0, e1)
-    return np.stack([e1, e2], axis=1)
 
-
-def _unpack(p, v0, E):
-    l = jnp.stack([jnp.cos(p[0]), jnp.sin(p[0]), -p[1]])
-    v = v0 + E @ p[2:]
-    return v / jnp.linalg.norm(v), l
-
-
-def _pack(v: np.ndarray, l: np.ndarray):
-    """Start parameters ``(p0, v0, E)`` from a homology (v, l) in normalised coords."""
-    v = np.asarray(v, float) / np.linalg.norm(v)
-    l = np.asarray(l, float) / np.linalg.norm(l[:2])
-    return np.array([np.arctan2(l[1], l[0]), -l[2], 0.0, 0.0]), v, _tangent_basis(v)
-
-
-# ---------------------------------------------------------------- initialisation
-
-
-def _convex_hull_indices(p: np.ndarray) -> np.ndarray:
-    """Indices of the convex hull vertices of ``p`` (n, 2), sorted by index."""
-    hull = cv2.convexHull(np.ascontiguousarray(p, dtype=np.float32), returnPoints=False)
-    return np.unique(hull.reshape(-1).astype(int))
-
-
-def _pockets(p: np.ndarray, min_depth: float):
-    """Concavities of a positively oriented closed curve: ``(depth, i, j)`` for every
-    hull edge from vertex ``i`` to ``j`` (in curve order) whose skipped stretch of
-    outline lies deeper than ``min_depth`` inside the hull, deepest first."""
-    n = len(p)
-    h = _convex_hull_indices(p)
-    out = []
-    for a, b in zip(h, np.roll(h, -1)):
-        gap = (b - a) % n
-        if gap < 3:
-            continue
-        idx = (a + np.arange(1, gap)) % n
-        d = p[b] - p[a]
-        nrm = np.hypot(*d)
-        if nrm == 0:
-            continue
-        depth = np.max(np.abs((p[idx, 0] - p[a, 0]) * d[1] - (p[idx, 1] - p[a, 1]) * d[0]) / nrm)
-        if depth > min_depth:
-            out.append((float(depth), int(a), int(b)))
-    out.sort(reverse=True)
-    return out
-
-
-def _hom(x):
-    return np.array([x[0], x[1], 1.0])
-
-
-def bitangent_candidates(p: np.ndarray, max_pockets: int = 4) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Homologies ``(v, l)`` from pairs of convex-hull bitangents (paper, Sec. 5.1).
-
-    ``p`` is the positively oriented outline in normalised coordinates.  For pockets
-    spanning ``a1 -> a2`` and ``b1 -> b2`` along the curve, the reflection pairs
-    ``a1 <-> b2`` and ``a2 <-> b1``.
-    """
-    scale = np.sqrt(np.mean(np.sum((p - p.mean(0)) ** 2, axis=1)))
-    pockets = _pockets(p, min_depth=0.03 * scale)[:max_pockets]
-    cands = []
-    for i in range(len(pockets)):
-        for j in range(i + 1, len(pockets)):
-            a1, a2 = _hom(p[pockets[i][1]]), _hom(p[pockets[i][2]])
-            b1, b2 = _hom(p[pockets[j][1]]), _hom(p[pockets[j][2]])
-            # order the two pockets along the curve so that a1 < a2 <= b1 < b2
-            v = np.cross(np.cross(a1, b2), np.cross(a2, b1))
-            l = np.cross(np.cross(np.cross(a1, a2), np.cross(b1, b2)),
-                         np.cross(np.cross(a1, b1), np.cross(b2, a2)))
-            if np.linalg.norm(v) < 1e-12 or np.linalg.norm(l[:2]) < 1e-12:
-                continue
-            if abs(v @ l) < 1e-9 * np.linalg.norm(v) * np.linalg.norm(l):
-                continue  # vertex on the axis: not a homology
-            cands.append((v, l))
-    return cands
-
-
-@jax.jit
-def _mirror_costs(knots, samples, thetas, offsets):
-    """Truncated eq. 20 cost of the mirror symmetries with axis directions ``thetas``
-    and offsets ``offsets`` (a grid), ``v`` at infinity orthogonal to the axis.  The
-    distance is to the nearest of the coarse ``knots`` (enough to rank a grid)."""
-
-    def cost(theta, rho):
-        l = jnp.stack([jnp.cos(theta), jnp.sin(theta), -rho])
-        v = jnp.stack([jnp.cos(theta), jnp.sin(theta), 0.0])
-        y = transfer(homology_matrix(v, l), samples)
-        # |y - k|^2 = |y|^2 + |k|^2 - 2 y.k, the cross term as one matrix product
-        d2 = jnp.sum(y**2, -1)[:, None] + jnp.sum(knots**2, -1)[None, :] - 2.0 * y @ knots.T
-        return jnp.mean(jnp.minimum(jnp.min(d2, -1), 0.25))  # truncated: robust to gross mismatch
-
-    return jax.vmap(lambda t: jax.vmap(lambda r: cost(t, r))(offsets))(thetas)
-
-
-_GRID_KNOTS = 64
-_GRID_SAMPLES = 50
-
-
-def mirror_candidates(points_n: np.ndarray, samples, keep: int = 3):
-    """Best local minima of the mirror-symmetry grid search (normalised coords).
-
-    The grid's cost reads the distance to the nearest of ``_GRID_KNOTS`` outline points
-    from ``_GRID_SAMPLES`` of the samples: enough to rank a grid whose candidates are
-    refined anyway (a quarter of the work of 128 knots and 100 samples; measured on 400
-    noisy random views: the same views started in the right basin)."""
-    thetas = np.linspace(0.0, np.pi, _GRID_DIRECTIONS, endpoint=False)
-    offsets = np.asarray(_GRID_OFFSETS)
-    knots = points_n[np.linspace(0, len(points_n), _GRID_KNOTS, endpoint=False).astype(int)]
-    sub = samples[:: max(1, samples.shape[0] // _GRID_SAMPLES)]
-    c = np.asarray(_mirror_costs(knots, sub, thetas, offsets))
-    best = c.min(axis=1)
-    is_min = (best <= np.roll(best, 1)) & (best <= np.roll(best, -1))
-    order = [i for i in np.argsort(best) if is_min[i]][:keep]
-    out = []
-    for i in order:
-        t, r = thetas[i], offsets[int(np.argmin(c[i]))]
-        out.append((np.array([np.cos(t), np.sin(t), 0.0]), np.array([np.cos(t), np.sin(t), -r])))
-    return out
-
-
-# ------------------------------------------------------------------------ refine
-
-
-_BARRIER_AT = 0.3
-_BARRIER_GAIN = 100.0
-
-
-def _residuals(p, args):
-    """Eq. 20's residuals plus one barrier residual, ``100 relu(0.3 - a)`` with
-    ``a = |v . l| / (|v| |l|)`` in the view's normalised coordinates.
-
-    As ``v`` approaches the axis ``l`` the homology degenerates into a projection that
-    sends every point to ``v``; with ``v`` on the outline that "fits" perfectly.  The
-    true vertex is far from that: ``a`` is the sine of the angle between the axis and
-    the direction from the outline's centre to ``v`` (1 for a mirror symmetry), above
-    0.99 in every synthetic view we measured, so the barrier is 0 at every real
-    solution and only walls off the degenerate ones."""
-    field, samples, weights, v0, E = args[:5]
-    hints = args[5] if len(args) > 5 else None  # closest-point parameters to search near
-    v, l = _unpack(p, v0, E)
-    r = symmetry_residuals(v, l, samples, field, weights, hints)
-    a = jnp.abs(v @ l) / jnp.linalg.norm(l)
-    return jnp.concatenate([r, _BARRIER_GAIN * jax.nn.relu(_BARRIER_AT - a)[None]])
-
-
-# Screening (COARSE_STEPS loose Levenberg-Marquardt steps from every start), then
-# polishing: see :mod:`sorjax._solvers`.  Measured on 400 noisy random views (paper
-# noise, sigma 1 px; experiments/accuracy.py's init study): 15, 8 and 5 screening steps
-# all started 399-400 of them in the right basin (390-393 axes within 1 deg); on the
-# study's 1000 views, 5 steps: 996 in the right basin, 969 axes within 1 deg (15 steps:
-# 997 and 964).  5 steps cost a third of 15 (the polish takes ~6 Gauss-Newton steps more).
-_SOLVERS = solvers(rtol=1e-10, atol=1e-10)
-COARSE_STEPS = 5
-SCREEN_BATCH = 4  # starts screened by one vmapped call (one compilation for any count)
-
-
-def refine(field: DistanceField, samples, weights, p0, v0, E, max_steps: int = 100, method: str = "lm"):
-    """Minimise eq. 20 from one start ``(p0, v0, E)`` (normalised coordinates) with
-    ``method``: "lm" (Levenberg-Marquardt), "gn" (Gauss-Newton) or "screen" (loose
-    Levenberg-Marquardt: the screening stage of :func:`fit_homology`).  Returns
-    ``(v, l, cost, converged, steps, p, r, stale)`` with ``r`` eq. 20's residuals; pure,
-    jit/vmap-able.
-
-    As in the bundle (:func:`sorjax._bundle.solve`) the solver searches each closest
-    point only near where it was at ``p0``; ``r`` and the cost are searched over the
-    whole outline, and ``stale`` says that they differ from the solver's (a closest
-    point left its window: solve again from ``p``)."""
-    args = (field, samples, weights, v0, E)
-    hints = symmetry_feet(*_unpack(p0, v0, E), samples, field)
-    sol = optx.least_squares(_residuals, _SOLVERS[method], p0, args=args + (hints,), max_steps=max_steps,
-                             throw=False)
-    v, l = _unpack(sol.value, v0, E)
-    r = _residuals(sol.value, args)
-    stale = is_stale(r, _residuals(sol.value, args + (hints,)))
-    ok = sol.result == optx.RESULTS.successful
-    return v, l, jnp.sum(r**2), ok, sol.stats["num_steps"], sol.value, r[:-1], stale
-
-
-@functools.partial(jax.jit, static_argnames=("n_samples", "smooth"))
-def _view_setup(points_n, n_samples: int, smooth: float = 0.0):
-    field = make_field(points_n, smooth)
-    return field, curve_points(field, n_samples), sample_weights(field, n_samples)
-
-
-_refine_jit = jax.jit(refine, static_argnames=("max_steps", "method"))
-
-
-@jax.jit
-def _screen(field, samples, weights, p0, v0, E):
-    """Screen a batch of starts (leading axis) at once: ``(cost, p, steps)`` of each
-    after at most ``COARSE_STEPS`` loose Levenberg-Marquardt steps."""
-
-    def one(p, v, e):
-        out = refine(field, samples, weights, p, v, e, max_steps=COARSE_STEPS, method="screen")
-        return out[2], out[5], out[4]
-
-    return jax.vmap(one)(p0, v0, E)
-
-
-def _refine_candidates(field, samples, weights, cands, max_steps: int = 100):
-    """Screen every start ``(v, l)`` (normalised coordinates) with a few loose
-    Levenberg-Marquardt steps (``SCREEN_BATCH`` starts per vmapped call, the last batch
-    padded by repeating a start), then polish the lowest-cost one to convergence
-    (Gauss-Newton, or Levenberg-Marquardt where that fails or ends above its start)."""
-    starts = [_pack(v0, l0) for v0, l0 in cands]
-    if not starts:
-        raise FloatingPointError("every start of the homology fit gave a non-finite cost")
-    costs, ps, steps0 = [], [], []
-    for i in range(0, len(starts), SCREEN_BATCH):
-        chunk = starts[i:i + SCREEN_BATCH]
-        chunk = chunk + [chunk[0]] * (SCREEN_BATCH - len(chunk))
-        c, p, n = _screen(field, samples, weights, *(np.stack(a) for a in zip(*chunk)))
-        costs.append(np.asarray(c))
-        ps.append(np.asarray(p))
-        steps0.append(np.asarray(n))
-    costs = np.concatenate(costs)[: len(starts)]
-    ps = np.concatenate(ps)
-    costs = np.where(np.isfinite(costs), costs, np.inf)
-    if not np.isfinite(costs).any():
-        raise FloatingPointError("every start of the homology fit gave a non-finite cost")
-    k = int(np.argmin(costs))  # the first of equal costs, as the serial screen kept
-    cost0 = float(costs[k])
-    v0, E = starts[k][1:]
-    out0_p = ps[k]
-
-    def run(p, method):
-        def once(p):
-            out = _refine_jit(field, samples, weights, p, v0, E, max_steps=max_steps, method=method)
-            return out, out[5], int(out[4]), bool(out[7])
-
-        out, steps = until_fresh(once, p)
-        return Solved(out[5], bool(out[3]), float(out[2]), steps, out)
-
-    final, steps = polish(run, out0_p, cost0)
-    out = final.out
-    return out[0], out[1], float(out[2]), out[3], int(np.concatenate(steps0)[k]) + steps, out[6]
-
-
-TRIM_K = 4.0  # robust standard deviations
-TRIM_FLOOR_PX = 0.1
-TRIM_ROUNDS = 3
-
-
-def outlier_samples(r_px: np.ndarray, active: np.ndarray, inliers: np.ndarray | None = None) -> np.ndarray:
-    """Samples (among ``active``) whose symmetry residual (px) is an outlier:
-    ``|r| > max(TRIM_K s, TRIM_FLOOR_PX)`` with the robust scale ``s = 1.4826
-    median|r|`` over the current ``inliers`` (default: the active samples).  Noise
-    alone trims almost nothing (Gaussian residuals: 6e-5 of the samples); a part of
-    the outline with no mirror image (a mug's handle, a shadow, a bite taken by an
-    occluder) leaves residuals of several px there, and at its mirror image."""
-    a = np.abs(np.asarray(r_px))
-    base = active if inliers is None else active & inliers
-    if not base.any():
-        return np.zeros_like(active)
-    s = 1.4826 * float(np.median(a[base]))
-    return active & (a > max(TRIM_K * s, TRIM_FLOOR_PX))
-
-
-def _robust_refits(field, samples, weights, fit, scale: float, max_steps: int):
-    """Trimmed refits of a per-view fit ``(v, l, cost, ok, steps, r)`` (normalised):
-    up to ``TRIM_ROUNDS`` times, trim the outliers (:func:`outlier_samples`, scale
-    from the samples kept so far) and refit from the current solution, never below
-    half of the samples.  Returns the final fit and the inlier mask (corner samples,
-    weight 0, count as inliers).  A handle so large that it inflates the residuals
-    everywhere can mask itself (no outlier stands out): such a view keeps a high RMS
-    residual and :func:`sorjax.calibrate` drops or flags it."""
-    w0 = np.asarray(weights)
-    active = w0 > 0
-    keep = np.ones_like(active)
-    for _ in range(TRIM_ROUNDS):
-        out = outlier_samples(np.asarray(fit[5]) * scale, active, keep) & keep
-        if not out.any() or (keep & ~out & active).sum() < active.sum() // 2:
-            break
-        keep = keep & ~out
-        new = _refine_candidates(field, samples, jnp.asarray(w0 * keep), [(np.asarray(fit[0]), np.asarray(fit[1]))],
-                                 max_steps=max_steps)
-        fit = new[:4] + (fit[4] + new[4], new[5])
-    return fit, keep
-
-
-@jax.jit
-def _infinity_z(field, samples, weights, v, l, cost):
-    """``|v_3| / std(v_3)`` for the fitted ``(v, l)`` (normalised coordinates): the
-    Gauss-Newton covariance ``s^2 (J^T J)^-1`` of eq. 20's parameters in a chart
-    centred on the solution, ``s^2 = cost / (N - 4)``."""
-    v = v / jnp.linalg.norm(v)
-    l = l / jnp.linalg.norm(l[:2])
-    p = jnp.stack([jnp.arctan2(l[1], l[0]), -l[2], 0.0, 0.0])
-    e1 = jnp.cross(v, jnp.eye(3)[jnp.argmin(jnp.abs(v))])
-    e1 = e1 / jnp.linalg.norm(e1)
-    E = jnp.stack([e1, jnp.cross(v, e1)], axis=1)
-    J = jax.jacfwd(_residuals)(p, (field, samples, weights, v, E))
-    s2 = cost / jnp.maximum(jnp.sum(weights) - 4.0, 1.0)
-    cov = s2 * jnp.linalg.pinv(J.T @ J, hermitian=True)
-    var3 = E[2] @ cov[2:, 2:] @ E[2]
-    return jnp.abs(v[2]) / jnp.sqrt(jnp.maximum(var3, 1e-300))
-
-
-def fit_conic(points_n: np.ndarray):
-    """Algebraic least-squares conic of points (normalised coordinates): the SVD null
-    vector of ``[x^2, xy, y^2, x, y, 1]``.  Returns ``(C, rms)``: the symmetric 3x3
-    conic and the RMS Sampson distance of the points from it (points' units)."""
-    x, y = points_n[:, 0], points_n[:, 1]
-    D = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], 1)
-    # the SVD of the small triangular factor (same null vector as D's own SVD; a LAPACK
-    # SVD of the tall D took 2-16 ms once XLA's threads were busy, this 0.05 ms)
-    a, b, c, d, e, f = np.linalg.svd(np.linalg.qr(D, mode="r"))[2][-1]
-    val = D @ np.array([a, b, c, d, e, f])
-    gx, gy = 2 * a * x + b * y + d, b * x + 2 * c * y + e
-    rms = float(np.sqrt(np.mean(val**2 / np.maximum(gx**2 + gy**2, 1e-300))))
-    return np.array([[a, b / 2, d / 2], [b / 2, c, e / 2], [d / 2, e / 2, f]]), rms
-
-
-NEAR_CONIC = 0.05  # normalised units (the outline's RMS radius is sqrt 2)
-
-
-def conic_candidates(points_n: np.ndarray, n_dir: int = 36, conic=None):
-    """For a nearly conic outline (a bowl seen from above): every line ``l`` through
-    the conic's centre with its pole ``v = C^-1 l`` is an exact homology of the conic;
-    the outline's departure from the conic picks the right one, so these are starts.
-    ``conic`` is :func:`fit_conic`'s result when already at hand.  36 directions: of
-    1000 noisy random views, 6 started outside the basin of the best fit with 12
-    directions, 3 with 36 (more did not help); only near-conic outlines pay for them."""
-    C, rms = fit_conic(points_n) if conic is None else conic
-    if rms > NEAR_CONIC:
-        return []
-    try:
-        Ci = np.linalg.inv(C)
-    except np.linalg.LinAlgError:
-        return []
-    centre = Ci[:, 2] / Ci[2, 2] if abs(Ci[2, 2]) > 1e-12 else np.array([0.0, 0.0, 1.0])
-    out = []
-    for t in np.linspace(0.0, np.pi, n_dir, endpoint=False):
-        l = np.array([np.cos(t), np.sin(t), -(np.cos(t) * centre[0] + np.sin(t) * centre[1])])
-        v = Ci @ l
-        if np.linalg.norm(v) > 0 and abs(v @ l) > 1e-9 * np.linalg.norm(v) * np.linalg.norm(l):
-            out.append((v, l))
-    return out
-
-
-def _to_pixels(T: np.ndarray, v, l, cost, ok, steps, scale, n_samples, conic, z=None, inliers=None,
-               rms_untrimmed=None) -> Homology:
-    """The :class:`Homology` in pixels of a fit in the coordinates of ``T`` (numpy
-    arithmetic: a handful of 3-vectors, no per-op dispatch)."""
-    v_pix = np.linalg.solve(T, np.asarray(v, dtype=np.float64))
-    v_pix = v_pix / np.linalg.norm(v_pix)
-    l_pix = T.T @ np.asarray(l, dtype=np.float64)
-    l_pix = l_pix / np.linalg.norm(l_pix[:2])
-    cost_px = float(cost) * scale**2
-    W = np.eye(3) - 2.0 * np.outer(v_pix, l_pix) / (v_pix @ l_pix)
-    fields = dict(
-        l_s=l_pix, v_x=v_pix, W=W, rms=np.sqrt(cost_px / n_samples), cost=np.float64(cost_px),
-        converged=np.bool_(bool(ok)), steps=np.int64(int(steps)), conic_rms=np.float64(float(conic) * scale),
-        infinity_z=None if z is None else np.float64(float(z)),
-        inliers=None if inliers is None else np.asarray(inliers),
-        rms_untrimmed=None if rms_untrimmed is None else np.float64(float(rms_untrimmed)),
-    )
-    return Homology(**jax.device_put(fields))  # one transfer for every field
+# The per-view fit lives in sorjax.core (which imports the maths above): imported after them.
+from .core._options import Options  # noqa: E402
+from .core._prepare import prepare_views  # noqa: E402
+from .core._viewfit import fit_view, pixel_homology  # noqa: E402
+
+DEFAULT_SAMPLES = Options().n_samples
+
+
+@functools.partial(jax.jit, static_argnames=("options", "smooth"))
+def _fit_core(points, init, options, smooth):
+    """Prepare one outline (pixels), fit it and express the fit in pixels."""
+    views = prepare_views(points[None], options.n_samples, smooth)
+    view = jax.tree_util.tree_map(lambda a: a[0], views)
+    T = view.T
+    if init is not None:
+        init = (T @ init[0], jnp.linalg.solve(T.T, init[1]))
+    fit = fit_view(view.fields, view.samples, view.weights, view.points, options, init, 1.0 / T[0, 0])
+    return pixel_homology(fit, T, options)
 
 
 def fit_homology(
@@ -558,40 +205,34 @@ def fit_homology(
             uses 100).
         n_points: the outline is resampled to this many points for its distance field.
         init: optional starting homology ``(v_x, l_s)`` in pixels (homogeneous); by
-            default the start is found automatically (bitangents of the convex hull
-            and a symmetry-axis search, the lowest final cost wins).
-        max_steps: Levenberg-Marquardt step limit.
+            default the start is found automatically (bitangents of the convex hull,
+            a symmetry-axis search and, for a nearly conic outline, pole-polar pairs
+            of its conic; the lowest screened cost wins).
+        max_steps: step limit of each polishing solve.
         smooth_px: smooth the outline along the curve (Gaussian, std in px of arc
             length) before building its distance field and samples; 0 (default) uses
             the outline as given.
-        robust: trim samples whose residual is an outlier (:func:`outlier_samples`:
-            a handle, a shadow, an occlusion) and refit (:func:`_robust_refits`;
-            never below half of the samples); ``Homology.inliers`` says which were
-            kept.  Outlines with no outlier are not refitted.
+        robust: trim samples whose residual is an outlier (a handle, a shadow, an
+            occlusion: above ``max(trim_k * 1.4826 median|r|, trim_floor_px)``) and
+            refit, ``Options().trim_rounds`` times at most, never below half of the
+            samples; ``Homology.inliers`` says which were kept.
 
     Returns:
         :class:`Homology` in pixels, with the RMS symmetry residual in px.
+
+    The fit is :func:`sorjax.core._viewfit.fit_view` (pure, jit / vmap-able), run once
+    under ``jax.jit``.
     """
     o = make_outline(outline, n_points)
     pts = np.asarray(o.points)
-    T = normalising_transform(pts)
-    scale = 1.0 / T[0, 0]
-    pn = transform_points(T, pts)
     smooth = float(smooth_px) / (perimeter(pts) / o.n_points) if smooth_px else 0.0
-    field, samples, weights = _view_setup(pn, n_samples, smooth)
-    conic = fit_conic(pn)
+    options = Options(n_samples=int(n_samples), max_steps=int(max_steps),
+                      trim_rounds=Options().trim_rounds if robust else 0)
     if init is not None:
-        v0, l0 = (np.asarray(a, dtype=np.float64) for a in init)
-        cands = [(T @ v0, np.linalg.solve(T.T, l0))]
-    else:
-        cands = bitangent_candidates(pn) + mirror_candidates(pn, samples) + conic_candidates(pn, conic=conic)
-    fit = _refine_candidates(field, samples, weights, cands, max_steps=max_steps)
-    w_np = np.asarray(weights)
-    rms_all = float(np.sqrt(fit[2] / max(float(np.sum(w_np)), 1.0))) * scale
-    inliers = np.ones(n_samples, bool)
-    if robust:
-        fit, inliers = _robust_refits(field, samples, weights, fit, scale, max_steps)
-    v, l, cost, ok, steps, _ = fit
-    w = w_np * inliers
-    z = _infinity_z(field, samples, w, np.asarray(v), np.asarray(l), np.float64(cost))
-    return _to_pixels(T, v, l, cost, ok, steps, scale, float(np.sum(w)), conic[1], z, inliers, rms_all)
+        init = tuple(jnp.asarray(np.asarray(a, dtype=np.float64)) for a in init)
+    h = _fit_core(jnp.asarray(pts), init, options, smooth)
+    if not np.isfinite(float(h.cost)):
+        raise FloatingPointError("every start of the homology fit gave a non-finite cost")
+    return Homology(l_s=h.l_s, v_x=h.v_x, W=h.W, rms=h.rms, cost=h.cost, converged=h.converged, steps=h.steps,
+                    conic_rms=h.conic_rms, infinity_z=h.infinity_z, inliers=h.inliers,
+                    rms_untrimmed=h.rms_untrimmed)

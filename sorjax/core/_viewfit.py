@@ -1,0 +1,526 @@
+"""The per-view fit of eq. 20 as one pure function of fixed-shape arrays.
+
+One view, in its own normalised coordinates (:mod:`sorjax.core._prepare`): find the
+harmonic homology ``W(v, l)`` minimising the paper's eq. 20::
+
+    Cost(v, l) = sum_i w_i d(W(v, l) x_i)^2
+
+from a fixed-size set of automatic starts, all computed inside the program:
+
+* bitangents of the convex hull (paper, Section 5.1): the hull's vertices are the
+  outline points extreme along ``HULL_DIRECTIONS`` directions; a pocket is a gap
+  between consecutive hull vertices along the curve, its depth the largest distance of
+  the skipped points from the chord (``jax.ops.segment_max``); the ``MAX_POCKETS``
+  deepest pockets deeper than ``0.03`` of the RMS radius, their ends moved to the exact
+  hull edge (:func:`_exact_edge`: the same touching points as an exact convex hull),
+  give their 6 pairs;
+* mirror symmetries on a grid of axis directions and offsets, the ``MIRROR_KEEP``
+  lowest local minima over the directions (top-k over the masked minima);
+* for a nearly conic outline (conic residual below ``NEAR_CONIC``), the
+  ``CONIC_DIRECTIONS`` pole-polar pairs of its best-fitting conic;
+
+``N_STARTS`` (45) slots in all, an unused slot masked (cost infinite): the same starts
+as the host code this replaces.  Every valid start is screened by
+``options.screen_steps`` loose Levenberg-Marquardt steps (:func:`_screen`: the valid
+starts compacted to the front and screened ``SCREEN_BLOCK`` per vmapped solve, in a
+while loop that stops after the last valid one, so that the 36 conic slots cost
+nothing unless the outline is nearly conic), the lowest cost (the first of equal ones)
+is polished (Gauss-Newton, then Levenberg-Marquardt where that fails:
+:func:`sorjax._solvers.polish_traced`), then up to ``options.trim_rounds`` robust
+rounds trim outlier samples (a handle, a shadow) and refit, in a while loop that stops
+at the first round with nothing to trim (never below half of the samples).
+
+Under ``vmap`` every while loop runs until its slowest lane is done (the others
+masked): a batch costs what its most demanding view needs, per loop.
+
+Parameters of a solve (as in :mod:`sorjax._homology`): ``p = (theta, rho, d1, d2)``
+with ``l = (cos theta, sin theta, -rho)`` and ``v = normalise(v0 + d1 e1 + d2 e2)``,
+``e1, e2`` an orthonormal basis of the tangent plane of the unit sphere at ``v0``.
+
+Everything here is jit / vmap (over views and over trials) clean: no host syncs, no
+Python control flow on values.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Bool, Float, Int
+
+from .._field import DistanceField
+from .._homology import homology_matrix, symmetry_feet, symmetry_residuals, transfer
+from .._solvers import Solved, is_stale, polish_traced, solvers, until_fresh_traced
+from ._options import Options
+from ._prepare import Views
+
+# ------------------------------------------------------------------ fixed sizes
+
+HULL_DIRECTIONS = 256  # hull vertices: the points extreme along these directions
+MAX_POCKETS = 4  # deepest concavities kept: their 6 pairs are bitangent starts
+POCKET_DEPTH = 0.03  # a pocket counts when deeper than this fraction of the RMS radius
+MIRROR_DIRECTIONS = 48
+MIRROR_OFFSETS = (-0.3, -0.15, 0.0, 0.15, 0.3)
+MIRROR_KNOTS = 64  # the grid's cost: distance to the nearest of these outline points
+MIRROR_SAMPLES = 50  # ... from about this many of the samples
+MIRROR_KEEP = 3
+NEAR_CONIC = 0.05  # normalised units (the outline's RMS radius is sqrt 2)
+# 36 directions: of 1000 noisy random views, 6 started outside the basin of the best fit
+# with 12 directions, 3 with 36 (more did not help)
+CONIC_DIRECTIONS = 36
+N_BITANGENT = MAX_POCKETS * (MAX_POCKETS - 1) // 2
+N_STARTS = N_BITANGENT + MIRROR_KEEP + CONIC_DIRECTIONS
+
+_BARRIER_AT = 0.3
+_BARRIER_GAIN = 100.0
+_SOLVERS = solvers(rtol=1e-10, atol=1e-10)
+
+
+class ViewFit(eqx.Module):
+    """One view's fitted homology in its normalised coordinates (arrays only; stacks
+    under vmap).
+
+    Attributes:
+        v: (3,) unit vertex.
+        l: (3,) axis, ``a^2 + b^2 = 1``.
+        cost: eq. 20's cost over the kept samples (normalised units^2).
+        n: samples counted in ``cost`` (sum of weights over the inliers).
+        cost_untrimmed, n_untrimmed: the same for the fit to all samples, before any
+            trimming.
+        converged: the final solve reported success.
+        steps: solver steps taken (screen, polish and refits).
+        inliers: (N,) samples kept by the robust rounds (weight-0 samples count in).
+        infinity_z: ``|v_3| / std(v_3)`` (first order, affine invariant).
+        conic_rms: RMS Sampson distance of the outline from its best conic
+            (normalised units).
+    """
+
+    v: Float[Array, "3"]
+    l: Float[Array, "3"]
+    cost: Float[Array, ""]
+    n: Float[Array, ""]
+    cost_untrimmed: Float[Array, ""]
+    n_untrimmed: Float[Array, ""]
+    converged: Bool[Array, ""]
+    steps: Int[Array, ""]
+    inliers: Bool[Array, " N"]
+    infinity_z: Float[Array, ""]
+    conic_rms: Float[Array, ""]
+
+
+class ViewHomologies(eqx.Module):
+    """Homologies in pixels (:func:`pixel_homology` of one view, or stacked over views
+    by :func:`homologies_in_pixels`; arrays only).
+
+    ``v_x`` unit, ``l_s`` with ``a^2 + b^2 = 1``, ``W`` the homology matrix; ``rms``
+    (px) and ``cost`` (px^2) over the kept samples; ``rms_untrimmed`` (px) of the fit
+    to all samples; ``conic_rms`` (px); ``trimmed`` fraction of the samples;
+    ``at_infinity``: ``|v_x[2]| < 1e-9`` or ``infinity_z < options.infinity_z``;
+    ``is_conic``: ``conic_rms <= conic_ratio * rms + conic_floor_px``."""
+
+    v_x: Float[Array, "3"]
+    l_s: Float[Array, "3"]
+    W: Float[Array, "3 3"]
+    rms: Float[Array, ""]
+    cost: Float[Array, ""]
+    rms_untrimmed: Float[Array, ""]
+    conic_rms: Float[Array, ""]
+    trimmed: Float[Array, ""]
+    infinity_z: Float[Array, ""]
+    at_infinity: Bool[Array, ""]
+    is_conic: Bool[Array, ""]
+    converged: Bool[Array, ""]
+    steps: Int[Array, ""]
+    inliers: Bool[Array, " N"]
+
+
+# ---------------------------------------------------------------- parameters
+
+
+def _tangent_basis(v0):
+    """Orthonormal (3, 2) basis of the plane orthogonal to the unit vector ``v0``."""
+    a = jnp.eye(3)[jnp.argmin(jnp.abs(v0))]
+    e1 = jnp.cross(v0, a)
+    e1 = e1 / jnp.linalg.norm(e1)
+    return jnp.stack([e1, jnp.cross(v0, e1)], axis=1)
+
+
+def _unpack(p, v0, E):
+    l = jnp.stack([jnp.cos(p[0]), jnp.sin(p[0]), -p[1]])
+    v = v0 + E @ p[2:]
+    return v / jnp.linalg.norm(v), l
+
+
+def _pack(v, l):
+    """Start parameters ``(p0, v0, E)`` of a homology (v, l), normalised coordinates."""
+    v = v / jnp.linalg.norm(v)
+    l = l / jnp.linalg.norm(l[:2])
+    p = jnp.stack([jnp.arctan2(l[1], l[0]), -l[2], jnp.zeros_like(l[2]), jnp.zeros_like(l[2])])
+    return p, v, _tangent_basis(v)
+
+
+def _residuals(p, args):
+    """Eq. 20's residuals plus one barrier residual ``100 relu(0.3 - |v.l| / |l|)``
+    walling off the degenerate homologies with ``v`` on the axis (see
+    :mod:`sorjax._homology`)."""
+    field, samples, weights, v0, E = args[:5]
+    hints = args[5] if len(args) > 5 else None
+    v, l = _unpack(p, v0, E)
+    r = symmetry_residuals(v, l, samples, field, weights, hints)
+    a = jnp.abs(v @ l) / jnp.linalg.norm(l)
+    return jnp.concatenate([r, _BARRIER_GAIN * jax.nn.relu(_BARRIER_AT - a)[None]])
+
+
+def refine(field: DistanceField, samples, weights, p0, v0, E, max_steps: int, method: str):
+    """Minimise eq. 20 from ``(p0, v0, E)`` with ``method`` ("lm", "gn", "screen").
+    Returns ``(v, l, cost, converged, steps, p, r, stale)``: ``r`` the whole-outline
+    residuals, ``stale`` whether they differ from the solver's hinted ones."""
+    args = (field, samples, weights, v0, E)
+    hints = symmetry_feet(*_unpack(p0, v0, E), samples, field)
+    sol = optx.least_squares(_residuals, _SOLVERS[method], p0, args=args + (hints,), max_steps=max_steps,
+                             throw=False)
+    v, l = _unpack(sol.value, v0, E)
+    r = _residuals(sol.value, args)
+    stale = is_stale(r, _residuals(sol.value, args + (hints,)))
+    ok = sol.result == optx.RESULTS.successful
+    return v, l, jnp.sum(r**2), ok, jnp.asarray(sol.stats["num_steps"], jnp.int32), sol.value, r[:-1], stale
+
+
+class _Fit(eqx.Module):
+    v: Array
+    l: Array
+    cost: Array
+    ok: Array
+    steps: Array
+    r: Array
+
+
+SCREEN_BLOCK = 12  # starts screened per block (one vmapped solve); blocks run while needed
+
+
+def _screen(field, samples, weights, vs, ls, valid, options: Options):
+    """Screen the valid starts ``(vs, ls)`` (S, 3): ``options.screen_steps`` loose
+    Levenberg-Marquardt steps each.  The valid starts are moved to the front (stably:
+    their order is kept) and screened ``SCREEN_BLOCK`` at a time by a while loop that
+    stops after the last block holding a valid start: a view with few valid starts
+    (every view but a nearly conic one) pays for one block, and under ``vmap`` a batch
+    pays for the blocks its most demanding view needs.  Returns ``(costs, p, steps, v0,
+    E)`` in the compacted order, ``inf`` cost where invalid or non-finite."""
+    s = vs.shape[0]
+    block = min(SCREEN_BLOCK, s)
+    n_blocks = -(-s // block)
+    pad = n_blocks * block - s
+    order = jnp.argsort(~valid, stable=True)
+    vs, ls, valid = vs[order], ls[order], valid[order]
+    vs = jnp.concatenate([vs, jnp.broadcast_to(vs[:1], (pad, 3))])
+    ls = jnp.concatenate([ls, jnp.broadcast_to(ls[:1], (pad, 3))])
+    valid = jnp.concatenate([valid, jnp.zeros(pad, bool)])
+    vs = jnp.where(valid[:, None], vs, vs[0])  # invalid slots: a harmless copy
+    ls = jnp.where(valid[:, None], ls, ls[0])
+    p0, v0, E = jax.vmap(_pack)(vs, ls)
+    n_valid = jnp.sum(valid)
+
+    def screen(p, v, e):
+        out = refine(field, samples, weights, p, v, e, options.screen_steps, "screen")
+        return out[2], out[5], out[4]
+
+    def cond(c):
+        return c[0] * block < n_valid
+
+    def body(c):
+        b, costs, ps, steps = c
+        i = b * block
+        sl = lambda a: jax.lax.dynamic_slice_in_dim(a, i, block)  # noqa: E731
+        cb, pb, nb = jax.vmap(screen)(sl(p0), sl(v0), sl(E))
+        up = lambda a, u: jax.lax.dynamic_update_slice_in_dim(a, u, i, 0)  # noqa: E731
+        return b + 1, up(costs, cb), up(ps, pb), up(steps, nb)
+
+    n = n_blocks * block
+    init = (jnp.asarray(0, jnp.int32), jnp.full(n, jnp.inf), p0, jnp.zeros(n, jnp.int32))
+    _, costs, ps, steps0 = jax.lax.while_loop(cond, body, init)
+    costs = jnp.where(valid & jnp.isfinite(costs), costs, jnp.inf)
+    return costs, ps, steps0, v0, E
+
+
+def _fit_from_starts(field, samples, weights, vs, ls, valid, options: Options) -> _Fit:
+    """Screen the starts ``(vs, ls)`` (S, 3) where ``valid`` (:func:`_screen`), polish
+    the lowest-cost one (the first of equal costs)."""
+    costs, ps, steps0, v0, E = _screen(field, samples, weights, vs, ls, valid, options)
+    k = jnp.argmin(costs)
+    v0k, Ek = v0[k], E[k]
+
+    def run(p, method):
+        def once(p):
+            out = refine(field, samples, weights, p, v0k, Ek, options.max_steps, method)
+            return out, out[5], out[4], out[7]
+
+        out, _, steps = until_fresh_traced(once, p)
+        return Solved(out[5], out[3], out[2], steps, out)
+
+    final, steps = polish_traced(run, ps[k], costs[k])
+    out = final.out
+    cost = jnp.where(jnp.isfinite(costs[k]), out[2], jnp.nan)  # no start had a finite cost
+    return _Fit(out[0], out[1], cost, out[3], steps0[k] + steps, out[6])
+
+
+# ------------------------------------------------------------- starting points
+
+
+def _hom(x):
+    return jnp.concatenate([x, jnp.ones_like(x[..., :1])], axis=-1)
+
+
+HULL_WINDOW = 64  # the exact bitangent's touching points are searched +- this many points
+HULL_ITERATIONS = 6
+
+
+def _exact_edge(points, ia, ib):
+    """The hull edge (bitangent) near the approximate one from point ``ia`` to ``ib``:
+    alternately the points extreme along the chord's outward normal within
+    ``HULL_WINDOW`` of each end, until the chord supports the outline there."""
+    m = points.shape[0]
+    k = jnp.arange(-HULL_WINDOW, HULL_WINDOW + 1)
+    c = points.mean(0)
+
+    def step(_, e):
+        ia, ib = e
+        d = points[ib] - points[ia]
+        n = jnp.stack([d[..., 1], -d[..., 0]], -1)
+        n = jnp.where(jnp.sum(n * (c - points[ia]), -1, keepdims=True) > 0, -n, n)  # outward
+        wa, wb = (ia[..., None] + k) % m, (ib[..., None] + k) % m
+        ia = jnp.take_along_axis(wa, jnp.argmax(jnp.sum(points[wa] * n[..., None, :], -1), -1)[..., None], -1)[..., 0]
+        ib = jnp.take_along_axis(wb, jnp.argmax(jnp.sum(points[wb] * n[..., None, :], -1), -1)[..., None], -1)[..., 0]
+        return ia, ib
+
+    return jax.lax.fori_loop(0, HULL_ITERATIONS, step, (ia, ib))
+
+
+def bitangent_starts(points: Float[Array, "M 2"]):
+    """Bitangent starts ``(vs, ls, valid)`` (``N_BITANGENT`` slots) of a positively
+    oriented closed outline (normalised coordinates).  For pockets spanning ``a1 -> a2``
+    and ``b1 -> b2`` along the curve, the reflection pairs ``a1 <-> b2`` and
+    ``a2 <-> b1``: ``v = (a1 x b2) x (a2 x b1)`` and ``l`` joins the meet of the two
+    bitangents and ``(a1 x b1) x (b2 x a2)``."""
+    m = points.shape[0]
+    th = jnp.arange(HULL_DIRECTIONS) * (2.0 * np.pi / HULL_DIRECTIONS)
+    u = jnp.stack([jnp.cos(th), jnp.sin(th)], 1)
+    h = jnp.sort(jnp.argmax(points @ u.T, axis=0))  # hull vertices, curve order (repeats)
+    hn = jnp.roll(h, -1)
+    gap = (hn - h) % m
+    # each point's hull edge: the last hull vertex at or before it (cyclically)
+    seg = jnp.searchsorted(h, jnp.arange(m), side="right") - 1
+    seg = jnp.where(seg < 0, HULL_DIRECTIONS - 1, seg)
+    pa, pb = points[h], points[hn]
+    d = pb - pa
+    nrm = jnp.hypot(d[:, 0], d[:, 1])
+    safe = jnp.where(nrm > 0, nrm, 1.0)
+    q = points - pa[seg]
+    dist = jnp.abs(q[:, 0] * d[seg, 1] - q[:, 1] * d[seg, 0]) / safe[seg]
+    depth = jax.ops.segment_max(dist, seg, num_segments=HULL_DIRECTIONS)
+    scale = jnp.sqrt(jnp.mean(jnp.sum((points - points.mean(0)) ** 2, axis=1)))
+    ok = (gap >= 3) & (nrm > 0) & (depth > POCKET_DEPTH * scale)
+    top, idx = jax.lax.top_k(jnp.where(ok, depth, -jnp.inf), MAX_POCKETS)
+    has = jnp.isfinite(top)
+    ia, ib = _exact_edge(points, h[idx], hn[idx])
+    A1, A2 = _hom(points[ia]), _hom(points[ib])
+    ii, jj = np.triu_indices(MAX_POCKETS, k=1)
+    a1, a2, b1, b2 = A1[ii], A2[ii], A1[jj], A2[jj]
+    v = jnp.cross(jnp.cross(a1, b2), jnp.cross(a2, b1))
+    l = jnp.cross(jnp.cross(jnp.cross(a1, a2), jnp.cross(b1, b2)), jnp.cross(jnp.cross(a1, b1), jnp.cross(b2, a2)))
+    nv, nl = jnp.linalg.norm(v, axis=1), jnp.linalg.norm(l, axis=1)
+    valid = has[ii] & has[jj] & (nv >= 1e-12) & (jnp.linalg.norm(l[:, :2], axis=1) >= 1e-12)
+    valid = valid & (jnp.abs(jnp.sum(v * l, 1)) >= 1e-9 * nv * nl) & jnp.all(jnp.isfinite(v) & jnp.isfinite(l), 1)
+    return v, l, valid
+
+
+def mirror_starts(points: Float[Array, "M 2"], samples: Float[Array, "N 2"]):
+    """The ``MIRROR_KEEP`` best local minima (over the axis directions, cyclic) of the
+    mirror-symmetry grid: ``(vs, ls, valid)``, ``v`` at infinity orthogonal to ``l``.
+    The grid's cost is eq. 20's truncated at 0.25, with the distance to the nearest of
+    ``MIRROR_KNOTS`` outline points from about ``MIRROR_SAMPLES`` samples."""
+    m, n = points.shape[0], samples.shape[0]
+    knots = points[np.linspace(0, m, MIRROR_KNOTS, endpoint=False).astype(int)]
+    sub = samples[:: max(1, n // MIRROR_SAMPLES)]
+    thetas = jnp.asarray(np.linspace(0.0, np.pi, MIRROR_DIRECTIONS, endpoint=False))
+    offsets = jnp.asarray(MIRROR_OFFSETS)
+
+    def cost(theta, rho):
+        l = jnp.stack([jnp.cos(theta), jnp.sin(theta), -rho])
+        v = jnp.stack([jnp.cos(theta), jnp.sin(theta), 0.0])
+        y = transfer(homology_matrix(v, l), sub)
+        d2 = jnp.sum(y**2, -1)[:, None] + jnp.sum(knots**2, -1)[None, :] - 2.0 * y @ knots.T
+        return jnp.mean(jnp.minimum(jnp.min(d2, -1), 0.25))
+
+    c = jax.vmap(lambda t: jax.vmap(lambda r: cost(t, r))(offsets))(thetas)
+    best = c.min(axis=1)
+    is_min = (best <= jnp.roll(best, 1)) & (best <= jnp.roll(best, -1))
+    # the lowest minima, the first of equal ones first (top_k of the negated costs)
+    neg, i = jax.lax.top_k(jnp.where(is_min, -best, -jnp.inf), MIRROR_KEEP)
+    t, r = thetas[i], offsets[jnp.argmin(c[i], axis=1)]
+    zero = jnp.zeros_like(t)
+    v = jnp.stack([jnp.cos(t), jnp.sin(t), zero], 1)
+    l = jnp.stack([jnp.cos(t), jnp.sin(t), -r], 1)
+    return v, l, jnp.isfinite(neg)
+
+
+def fit_conic(points: Float[Array, "M 2"]):
+    """Algebraic least-squares conic of points: the null vector of ``[x^2, xy, y^2, x,
+    y, 1]`` (SVD of its QR factor).  Returns ``(C, rms)``: the symmetric 3x3 conic and
+    the RMS Sampson distance of the points from it (points' units)."""
+    x, y = points[:, 0], points[:, 1]
+    D = jnp.stack([x * x, x * y, y * y, x, y, jnp.ones_like(x)], 1)
+    R = jnp.linalg.qr(D, mode="r")
+    a, b, c, d, e, f = jnp.linalg.svd(R)[2][-1]
+    val = D @ jnp.stack([a, b, c, d, e, f])
+    gx, gy = 2 * a * x + b * y + d, b * x + 2 * c * y + e
+    rms = jnp.sqrt(jnp.mean(val**2 / jnp.maximum(gx**2 + gy**2, 1e-300)))
+    C = jnp.stack([jnp.stack([a, b / 2, d / 2]), jnp.stack([b / 2, c, e / 2]), jnp.stack([d / 2, e / 2, f])])
+    return C, rms
+
+
+def conic_starts(C, rms):
+    """For a nearly conic outline (``rms <= NEAR_CONIC``): the lines ``l`` through the
+    conic's centre in ``CONIC_DIRECTIONS`` directions with their poles ``v = C^-1 l``,
+    each an exact homology of the conic: ``(vs, ls, valid)``."""
+    Ci = jnp.linalg.inv(C)
+    near = (rms <= NEAR_CONIC) & jnp.all(jnp.isfinite(Ci))
+    far = jnp.abs(Ci[2, 2]) > 1e-12
+    centre = jnp.where(far, Ci[:, 2] / jnp.where(far, Ci[2, 2], 1.0), jnp.array([0.0, 0.0, 1.0]))
+    t = jnp.asarray(np.linspace(0.0, np.pi, CONIC_DIRECTIONS, endpoint=False))
+    l = jnp.stack([jnp.cos(t), jnp.sin(t), -(jnp.cos(t) * centre[0] + jnp.sin(t) * centre[1])], 1)
+    v = l @ Ci.T
+    nv, nl = jnp.linalg.norm(v, axis=1), jnp.linalg.norm(l, axis=1)
+    valid = near & (nv > 0) & (jnp.abs(jnp.sum(v * l, 1)) > 1e-9 * nv * nl)
+    return v, l, valid
+
+
+def automatic_starts(points, samples, conic=None):
+    """All ``N_STARTS`` automatic starts ``(vs, ls, valid)``, in the order bitangents,
+    mirror grid, conic (the argmin keeps the first of equal screened costs)."""
+    C, rms = fit_conic(points) if conic is None else conic
+    parts = (bitangent_starts(points), mirror_starts(points, samples), conic_starts(C, rms))
+    return tuple(jnp.concatenate(a) for a in zip(*parts))
+
+
+# --------------------------------------------------------------------- robust
+
+
+def _outliers(r_px, active, keep, options: Options):
+    """Samples among ``active & keep`` whose residual (px) exceeds ``max(trim_k s,
+    trim_floor_px)``, ``s = 1.4826 median|r|`` over ``active & keep``."""
+    a = jnp.abs(r_px)
+    base = active & keep
+    nb = jnp.sum(base)
+    srt = jnp.sort(jnp.where(base, a, jnp.inf))
+    lo, hi = jnp.maximum((nb - 1) // 2, 0), nb // 2
+    med = 0.5 * (srt[lo] + srt[jnp.minimum(hi, a.shape[0] - 1)])
+    s = 1.4826 * med
+    out = active & keep & (a > jnp.maximum(options.trim_k * s, options.trim_floor_px))
+    return out & (nb > 0)
+
+
+def _infinity_z(field, samples, weights, v, l, cost):
+    """``|v_3| / std(v_3)``: Gauss-Newton covariance ``s^2 (J^T J)^-1`` of eq. 20's
+    parameters in a chart centred on ``(v, l)``, ``s^2 = cost / (N - 4)``."""
+    p, v, E = _pack(v, l)
+    J = jax.jacfwd(_residuals)(p, (field, samples, weights, v, E))
+    s2 = cost / jnp.maximum(jnp.sum(weights) - 4.0, 1.0)
+    cov = s2 * jnp.linalg.pinv(J.T @ J, hermitian=True)
+    var3 = E[2] @ cov[2:, 2:] @ E[2]
+    return jnp.abs(v[2]) / jnp.sqrt(jnp.maximum(var3, 1e-300))
+
+
+# ------------------------------------------------------------------- the fit
+
+
+def fit_view(field: DistanceField, samples: Float[Array, "N 2"], weights: Float[Array, " N"],
+             points: Float[Array, "M 2"], options: Options = Options(), init=None, scale=1.0) -> ViewFit:
+    """Fit one view's harmonic homology (eq. 20) in its normalised coordinates.
+
+    Args:
+        field, samples, weights, points: the view's distance field, eq. 20's samples,
+            their corner weights and the outline's points (positively oriented), all
+            normalised (:func:`sorjax.core.prepare_views`, one view of it).
+        options: thresholds and budgets (static).
+        init: optional start ``(v, l)`` (normalised coordinates), replacing the
+            automatic ones.
+        scale: pixels per normalised unit (``options.trim_floor_px`` is in pixels).
+
+    Pure: jit / vmap (views, trials) clean.
+    """
+    C, conic_rms = fit_conic(points)
+    if init is None:
+        vs, ls, valid = automatic_starts(points, samples, (C, conic_rms))
+    else:
+        vs, ls = (jnp.asarray(a, jnp.float64)[None] for a in init)
+        valid = jnp.ones(1, bool)
+    fit = _fit_from_starts(field, samples, weights, vs, ls, valid, options)
+    n_all = jnp.sum(weights)
+    cost_all = fit.cost
+
+    active = weights > 0
+    keep = jnp.ones(samples.shape[0], bool)
+
+    def trims(fit, keep):
+        """The samples to keep after this round's trimming, and whether to refit."""
+        out = _outliers(fit.r * scale, active, keep, options)
+        go = jnp.any(out) & (jnp.sum(keep & ~out & active) >= jnp.sum(active) // 2)
+        return keep & ~out, go
+
+    def cond(c):
+        return c[4] & (c[0] < options.trim_rounds)
+
+    def body(c):
+        i, fit, keep, kept, _ = c
+        new = _fit_from_starts(field, samples, weights * kept, fit.v[None], fit.l[None], jnp.ones(1, bool), options)
+        new = eqx.tree_at(lambda f: f.steps, new, fit.steps + new.steps)
+        return (i + 1, new, kept) + trims(new, kept)
+
+    # a while loop, not a select: under vmap a batch with nothing to trim refits nothing
+    if options.trim_rounds:
+        c = (jnp.asarray(0, jnp.int32), fit, keep) + trims(fit, keep)
+        _, fit, keep, _, _ = jax.lax.while_loop(cond, body, c)
+    w = weights * keep
+    z = _infinity_z(field, samples, w, fit.v, fit.l, fit.cost)
+    l = fit.l / jnp.linalg.norm(fit.l[:2])
+    return ViewFit(fit.v / jnp.linalg.norm(fit.v), l, fit.cost, jnp.sum(w), cost_all, n_all, fit.ok,
+                   fit.steps, keep, z, conic_rms)
+
+
+def fit_views(views: Views, options: Options = Options(), init=None) -> ViewFit:
+    """:func:`fit_view` of every view of ``views`` (vmapped; ``init`` optional
+    ``(v, l)`` of shape (V, 3) each, in each view's normalised coordinates)."""
+    if init is None:
+        return jax.vmap(lambda f, s, w, p, sc: fit_view(f, s, w, p, options, None, sc))(
+            views.fields, views.samples, views.weights, views.points, views.scale)
+    return jax.vmap(lambda f, s, w, p, sc, v, l: fit_view(f, s, w, p, options, (v, l), sc))(
+        views.fields, views.samples, views.weights, views.points, views.scale, *init)
+
+
+def pixel_homology(fit: ViewFit, T: Float[Array, "3 3"], options: Options = Options()) -> ViewHomologies:
+    """One view's fit in pixels (``T`` its normalising similarity; vmap over views):
+    ``v_x = T^-1 v`` (unit), ``l_s = T^T l`` (``a^2 + b^2 = 1``), residuals in px."""
+    scale = 1.0 / T[0, 0]
+    v = jnp.linalg.solve(T, fit.v)
+    v = v / jnp.linalg.norm(v)
+    l = T.T @ fit.l
+    l = l / jnp.linalg.norm(l[:2])
+    cost = fit.cost * scale**2
+    rms = jnp.sqrt(cost / fit.n)
+    conic = fit.conic_rms * scale
+    W = homology_matrix(v, l)
+    return ViewHomologies(
+        v_x=v, l_s=l, W=W, rms=rms, cost=cost,
+        rms_untrimmed=jnp.sqrt(fit.cost_untrimmed / jnp.maximum(fit.n_untrimmed, 1.0)) * scale,
+        conic_rms=conic, trimmed=jnp.mean((~fit.inliers).astype(jnp.float64)), infinity_z=fit.infinity_z,
+        at_infinity=(jnp.abs(v[2]) < 1e-9) | (fit.infinity_z < options.infinity_z),
+        is_conic=conic <= options.conic_ratio * rms + options.conic_floor_px,
+        converged=fit.converged, steps=fit.steps, inliers=fit.inliers,
+    )
+
+
+def homologies_in_pixels(views: Views, fits: ViewFit, options: Options = Options()) -> ViewHomologies:
+    """:func:`pixel_homology` of every view (``fits`` from :func:`fit_views`)."""
+    return jax.vmap(lambda f, T: pixel_homology(f, T, options))(fits, views.T)

@@ -1,0 +1,155 @@
+"""The per-view fit as a pure function (sorjax.core._viewfit): truth, optimality,
+jit/vmap consistency, robust trimming, conic and at-infinity flags.
+
+All views go through one ``jax.jit(vmap)`` compilation (one batch of equal shapes)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import sorjax
+from sorjax import scenes
+from sorjax._camera import angle_between_planes, angle_between_rays
+from sorjax.core import Options, prepare_views
+from sorjax.core._viewfit import (N_STARTS, _pack, _residuals, automatic_starts, fit_view, fit_views,
+                                  homologies_in_pixels)
+from test_degenerate import K_TRUE, MIRROR, pose_at, posed, sphere_outline
+from test_homology import _with_handle
+
+OPTIONS = Options()
+
+
+def _points(outlines):
+    return jnp.stack([sorjax.make_outline(o).points for o in outlines])
+
+
+@jax.jit
+def _fit_all(points):
+    views = prepare_views(points, OPTIONS.n_samples)
+    fits = fit_views(views, OPTIONS)
+    return views, fits, homologies_in_pixels(views, fits, OPTIONS)
+
+
+@pytest.fixture(scope="module")
+def batch():
+    """(name, K, truth view or None, outline) of every view tested, fitted in one call."""
+    rows = []
+    sp = scenes.two_spheres(f=700.0)
+    rows += [(f"sphere {i}", sp.K, v, v.outline) for i, v in enumerate(sp.views)]
+    for seed in (1, 7):
+        sc = scenes.random_sor_scene(seed, n_views=2)
+        rows += [(f"sor {seed}.{i}", sc.K, v, v.outline) for i, v in enumerate(sc.views)]
+    rows += [(f"noisy sphere {i}", sp.K, v, scenes.paper_noise(v.outline, 1.0, 3 + i)) for i, v in enumerate(sp.views)]
+    sc = scenes.random_sor_scene(11, n_views=2)
+    rows += [(f"noisy sor {i}", sc.K, v, scenes.paper_noise(v.outline, 1.0, 20 + i)) for i, v in enumerate(sc.views)]
+    K = scenes.intrinsics(800.0)
+    hs = scenes.sor_scene(scenes.vase(), K, [scenes.look_at((0.8, -0.5, -1.6), (0.0, 0.0, 0.0), roll=0.3)])
+    rows.append(("handle", K, hs.views[0], _with_handle(hs.outlines[0], 0.15)))
+    prof = scenes.vase()
+    sphere = sphere_outline(K_TRUE, pose_at(prof, K_TRUE, 20, 40, 0.2, (200, 180)), np.array([0.0, 0.15, 0.0]), 0.08)
+    rows.append(("sphere outline", K_TRUE, None, sphere))
+    mirror = posed(MIRROR[:1])
+    rows.append(("mirror", K_TRUE, mirror.views[0], mirror.outlines[0]))
+    points = _points([r[3] for r in rows])
+    views, fits, homs = _fit_all(points)
+    return {r[0]: (i, r[1], r[2]) for i, r in enumerate(rows)}, views, fits, homs
+
+
+def _get(tree, i):
+    return jax.tree_util.tree_map(lambda a: a[i], tree)
+
+
+def _errors(K, h, view):
+    return float(angle_between_planes(K, h.l_s, view.l_s)), float(angle_between_rays(K, h.v_x, view.v_x))
+
+
+def test_fixed_number_of_starts(batch):
+    rows, views, _, _ = batch
+    i = rows["sor 1.0"][0]
+    vs, ls, valid = automatic_starts(views.points[i], views.samples[i])
+    assert vs.shape == ls.shape == (N_STARTS, 3) and valid.shape == (N_STARTS,)
+    assert bool(valid.any())
+
+
+def test_noise_free_views_match_truth(batch):
+    rows, _, fits, homs = batch
+    for name in ("sphere 0", "sphere 1", "sphere 2", "sor 1.0", "sor 1.1", "sor 7.0", "sor 7.1"):
+        i, K, view = rows[name]
+        h = _get(homs, i)
+        dl, dv = _errors(K, h, view)
+        assert dl < 1e-3 and dv < 1e-2, (name, dl, dv)
+        assert bool(h.converged) and float(h.trimmed) == 0.0
+        np.testing.assert_allclose(float(jnp.hypot(h.l_s[0], h.l_s[1])), 1.0, rtol=1e-12)
+    for name in ("sphere 0", "sphere 1", "sphere 2"):
+        assert float(_get(homs, rows[name][0]).rms) < 1e-5
+
+
+def test_noisy_views_are_local_minima_near_truth(batch):
+    """The noisy fits stop at a stationary point of eq. 20 (gradient ~ 0 in a chart
+    centred on the solution), with the axis close to the truth."""
+    rows, views, fits, homs = batch
+    for name in ("noisy sphere 0", "noisy sphere 1", "noisy sphere 2", "noisy sor 0", "noisy sor 1"):
+        i, K, view = rows[name]
+        f, h = _get(fits, i), _get(homs, i)
+        assert bool(f.converged) and float(h.trimmed) < 0.05  # noise alone trims little
+        assert 0.05 < float(h.rms) < 1.0
+        p, v0, E = _pack(f.v, f.l)
+        args = (_get(views.fields, i), views.samples[i], views.weights[i] * f.inliers, v0, E)
+        r = _residuals(p, args)
+        J = jax.jacfwd(_residuals)(p, args)
+        np.testing.assert_allclose(float(jnp.sum(r**2)), float(f.cost), rtol=1e-12)
+        g = J.T @ r  # half the gradient of the cost
+        assert float(jnp.linalg.norm(g)) < 1e-7 * float(jnp.linalg.norm(J)) * float(jnp.linalg.norm(r)), name
+        dl, _ = _errors(K, h, view)
+        assert dl < 0.5, (name, dl)
+
+
+def test_jit_vmap_equals_single_calls(batch):
+    rows, views, fits, _ = batch
+    one = jax.jit(lambda f, s, w, p, sc: fit_view(f, s, w, p, OPTIONS, None, sc))
+    for name in ("sor 7.0", "noisy sor 1", "handle"):
+        i = rows[name][0]
+        single = one(_get(views.fields, i), views.samples[i], views.weights[i], views.points[i], views.scale[i])
+        batched = _get(fits, i)
+        for a, b in zip(jax.tree_util.tree_leaves(single), jax.tree_util.tree_leaves(batched)):
+            if jnp.issubdtype(a.dtype, jnp.floating):
+                np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-9, atol=1e-12)
+            else:
+                np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_handle_is_trimmed(batch):
+    rows, _, fits, homs = batch
+    i, K, view = rows["handle"]
+    h, f = _get(homs, i), _get(fits, i)
+    dl, _ = _errors(K, h, view)
+    assert dl < 0.02 and float(h.rms) < 0.3 < float(h.rms_untrimmed)
+    assert 0.05 < float(h.trimmed) < 0.4
+    assert float(f.n) < float(f.n_untrimmed) and float(f.cost) < float(f.cost_untrimmed)
+    assert not bool(h.is_conic)
+
+
+def test_sphere_outline_is_conic(batch):
+    rows, _, _, homs = batch
+    assert bool(_get(homs, rows["sphere outline"][0]).is_conic)
+    assert not any(bool(_get(homs, rows[n][0]).is_conic) for n in ("sor 1.0", "noisy sor 0", "mirror"))
+
+
+def test_mirror_view_has_vertex_at_infinity(batch):
+    rows, _, _, homs = batch
+    i, K, view = rows["mirror"]
+    h = _get(homs, i)
+    assert abs(view.v_x[2]) < 1e-12
+    assert bool(h.at_infinity)
+    assert not bool(_get(homs, rows["sor 1.0"][0]).at_infinity)
+
+
+def test_init_replaces_the_automatic_starts(batch):
+    rows, views, fits, _ = batch
+    i = rows["noisy sor 0"][0]
+    f = _get(fits, i)
+    one = jax.jit(lambda f_, s, w, p, v, l: fit_view(f_, s, w, p, OPTIONS, (v, l), views.scale[i]))
+    g = one(_get(views.fields, i), views.samples[i], views.weights[i], views.points[i], f.v * 1.0001, f.l)
+    np.testing.assert_allclose(float(g.cost), float(f.cost), rtol=1e-8)
+    assert float(jnp.abs(g.l @ f.l)) > 1 - 1e-10
