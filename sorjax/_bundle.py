@@ -250,6 +250,12 @@ def orthographic_cost(y, problem: BundleProblem, max_steps: int = 100):
     Closest points are searched near where they were at the start, and the solve is
     repeated from its end should one of them leave its window (as in :func:`solve`;
     traced: :func:`sorjax._solvers.until_fresh_traced`)."""
+    return _orthographic_fit(y, problem, max_steps)[0]
+
+
+def _orthographic_fit(y, problem: BundleProblem, max_steps: int = 100):
+    """:func:`orthographic_cost` and the fitted ``z = (d, axes)`` (with ``k0``, the
+    padded ``k`` of ``y``): ``(cost, z, k0)``."""
     k0, a0 = y
     k0 = jnp.asarray(k0)
     if k0.shape[0] == 3:  # known aspect, compact chart: pad it
@@ -259,7 +265,8 @@ def orthographic_cost(y, problem: BundleProblem, max_steps: int = 100):
         z, cost, stale = _orthographic_solve(z, k0, problem, max_steps=max_steps)
         return cost, z, 0, stale
 
-    return until_fresh_traced(once, (k0[0] - k0[1], jnp.asarray(a0)))[0]
+    cost, z, _ = until_fresh_traced(once, (k0[0] - k0[1], jnp.asarray(a0)))
+    return cost, z, k0
 
 
 def _orthographic_params(z, k0, problem: BundleProblem):
@@ -530,6 +537,33 @@ def step_sigmas(y, problem: BundleProblem):
     return covariance(y, problem, jnp.eye(3))[2]
 
 
+@jax.custom_jvp
+def implicit_solution(y_star, problem: BundleProblem):
+    """``y_star`` (a minimum of the bundle's cost for ``problem``), differentiable in
+    ``problem`` by the implicit function theorem: ``dy = -H^+ d(grad_y C)`` with ``H``
+    the Hessian of the cost in ``y`` (closest points held where they are at ``y_star``;
+    ``H^+`` a pseudo-inverse: a masked view's and the padded chart's ignored parameters
+    have zero rows).  Nothing is computed unless differentiated: the solvers' loops
+    (``lax.while_loop``, which reverse mode cannot go through) stay out of the gradient
+    (:func:`bundle_estimate` runs them on ``stop_gradient`` inputs)."""
+    return y_star
+
+
+@implicit_solution.defjvp
+def _implicit_solution_jvp(primals, tangents):
+    y_star, problem = primals
+    dproblem = tangents[1]
+    flat, unravel = jax.flatten_util.ravel_pytree(y_star)
+    feet = foot_parameters(y_star, problem)
+
+    def grad_y(f, prob):
+        return jax.grad(lambda f: jnp.sum(residuals(unravel(f), prob, feet) ** 2))(f)
+
+    H = jax.jacfwd(grad_y)(flat, problem)
+    _, dg = jax.jvp(lambda p: grad_y(flat, p), (problem,), (dproblem,))
+    return y_star, unravel(-jnp.linalg.pinv(0.5 * (H + H.T), hermitian=True) @ dg)
+
+
 class BundleOut(eqx.Module):
     """The bundle's estimate, all arrays (pixels unless said otherwise).
 
@@ -568,7 +602,8 @@ class BundleOut(eqx.Module):
 
 @jax.jit
 def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options: Options = Options()) -> BundleOut:
-    """The joint bundle, one pure function of arrays (jit / vmap over trials).
+    """The joint bundle, one pure function of arrays (jit, vmap over trials, grad:
+    the optimum is differentiated implicitly, :func:`implicit_solution`).
 
     Args:
         points_n: (V, M, 2) outline points in the joint normalised coordinates ``T``.
@@ -586,14 +621,20 @@ def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, opt
     used = jnp.asarray(used, bool)
     T = jnp.asarray(T, jnp.float64)
     problem = make_problem(points_n, options.n_samples, aspect, inliers, used)
-    y, ok, steps, r = fit_bundle(problem, l_n, seeds, seed_ok, options)
+    fixed = jax.lax.stop_gradient(problem)  # the solvers: no tangents into their loops
+    y, ok, steps, r = fit_bundle(fixed, jax.lax.stop_gradient(l_n), jax.lax.stop_gradient(seeds), seed_ok, options)
+    y = implicit_solution(y, problem)
     cov, s2, _ = covariance(y, problem, T)
     K, omega, vx, ls = solution_in_pixels(y, problem, T)
     scale = 1.0 / T[0, 0]
     V = used.shape[0]
+    r = residuals(y, problem)  # the same as the solver's, and differentiable
     rv = r.reshape(V, -1) * scale
     cost = jnp.sum(rv**2)
-    evidence = orthographic_cost(y, problem) * scale**2 - cost
+    _, z, _ = _orthographic_fit(jax.lax.stop_gradient(y), fixed)
+    # its cost at the fitted z (envelope theorem: z's own derivative does not enter)
+    cost_o = jnp.sum(residuals(_orthographic_params(z, y[0], problem), problem) ** 2)
+    evidence = cost_o * scale**2 - cost
     nan = jnp.asarray(jnp.nan)
     return BundleOut(
         y=y, K=K, omega=omega,
