@@ -153,3 +153,15 @@ def test_init_replaces_the_automatic_starts(batch):
     g = one(_get(views.fields, i), views.samples[i], views.weights[i], views.points[i], f.v * 1.0001, f.l)
     np.testing.assert_allclose(float(g.cost), float(f.cost), rtol=1e-8)
     assert float(jnp.abs(g.l @ f.l)) > 1 - 1e-10
+
+
+def test_sequential_map_equals_vmap(batch):
+    rows, views, fits, _ = batch
+    idx = np.array([rows[n][0] for n in ("sor 1.1", "noisy sphere 1", "handle")])
+    sub = jax.tree_util.tree_map(lambda a: a[idx], views)
+    seq = jax.jit(lambda v: fit_views(v, OPTIONS, sequential=True))(sub)
+    for a, b in zip(jax.tree_util.tree_leaves(seq), jax.tree_util.tree_leaves(_get(fits, idx))):
+        if jnp.issubdtype(a.dtype, jnp.floating):
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-9, atol=1e-12)
+        else:
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))

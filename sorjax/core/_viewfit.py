@@ -489,14 +489,22 @@ def fit_view(field: DistanceField, samples: Float[Array, "N 2"], weights: Float[
                    fit.steps, keep, z, conic_rms)
 
 
-def fit_views(views: Views, options: Options = Options(), init=None) -> ViewFit:
-    """:func:`fit_view` of every view of ``views`` (vmapped; ``init`` optional
-    ``(v, l)`` of shape (V, 3) each, in each view's normalised coordinates)."""
+def fit_views(views: Views, options: Options = Options(), init=None, sequential: bool = False) -> ViewFit:
+    """:func:`fit_view` of every view of ``views`` (``init`` optional ``(v, l)`` of
+    shape (V, 3) each, in each view's normalised coordinates).
+
+    ``sequential`` (static): ``jax.lax.map`` over the views instead of ``jax.vmap``.
+    The results are the same (to round-off); the cost differs: a vmapped while loop
+    runs until its slowest view is done, a mapped one view by view.  Measured on CPU
+    (32 noisy random views, 2 busy cores): vmap 53 ms CPU per view (282 s to
+    compile), map 34 ms (56 s to compile); on an accelerator vmap is the one to use."""
     if init is None:
-        return jax.vmap(lambda f, s, w, p, sc: fit_view(f, s, w, p, options, None, sc))(
-            views.fields, views.samples, views.weights, views.points, views.scale)
-    return jax.vmap(lambda f, s, w, p, sc, v, l: fit_view(f, s, w, p, options, (v, l), sc))(
-        views.fields, views.samples, views.weights, views.points, views.scale, *init)
+        xs = (views.fields, views.samples, views.weights, views.points, views.scale)
+        one = lambda x: fit_view(x[0], x[1], x[2], x[3], options, None, x[4])  # noqa: E731
+    else:
+        xs = (views.fields, views.samples, views.weights, views.points, views.scale, init[0], init[1])
+        one = lambda x: fit_view(x[0], x[1], x[2], x[3], options, (x[5], x[6]), x[4])  # noqa: E731
+    return jax.lax.map(one, xs) if sequential else jax.vmap(one)(xs)
 
 
 def pixel_homology(fit: ViewFit, T: Float[Array, "3 3"], options: Options = Options()) -> ViewHomologies:
