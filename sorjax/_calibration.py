@@ -1,27 +1,33 @@
-"""From outlines to intrinsics: the :class:`Calibration` result and :func:`calibrate`.
+"""From outlines to intrinsics: the friendly entry point :func:`calibrate` and its
+:class:`Calibration`.
 
-Data flow (the paper's): outlines -> per-view harmonic homologies (eq. 20) ->
-Method I / IIa / IIb in normalised coordinates -> K in pixels.
+This is the boundary: plain-Python validation before anything is traced, then the
+functional core (:mod:`sorjax.core`: per-view homologies -> Method I / IIa / IIb ->
+the bundle -> verdicts, one compiled program of arrays), then the warnings and
+messages, written here from the core's arrays.  The views are padded to a few fixed
+counts (masked in the core), so that calibrations of 2, 3 or 4 views share one
+compiled program.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 
 import equinox as eqx
-import optimistix as optx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from ._camera import normalising_transform, transform_points
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
-from ._bundle import bundle_estimate, bundle_seeds, linearised_covariance
-from ._linear import linear_estimate, linear_in_pixels
-from .core._options import Options
 from ._outline import DEFAULT_POINTS, as_outlines
+from .core._assess import ASYMMETRIC, COLLAPSED_FOCAL, CONIC, MASKED, PP_OUTSIDE, TRIMMED, USED, WIDE_FOV
+from .core._calibrate import calibrate_homologies
+from .core._options import Options
 from .core._result import RESULTS
+from .core._viewfit import ViewHomologies
 
 METHODS = ("bundle", "I", "IIa", "IIb")
 
@@ -140,118 +146,6 @@ def _check_method(method: str, aspect_ratio):
             )
 
 
-def _linear_once(homologies, method: str, T: np.ndarray, a: float, weights=None):
-    TA = T @ np.diag([1.0 / a, 1.0, 1.0])
-    v, l = _stacked_homologies(homologies)
-    K, omega, ok = linear_in_pixels(v, l, TA, weights, method=method)
-    return K, omega, _linear_code(ok, method)
-
-
-def _stacked_homologies(homologies):
-    return (np.stack([np.asarray(h.v_x) for h in homologies]), np.stack([np.asarray(h.l_s) for h in homologies]))
-
-
-def _linear_code(ok, method: str):
-    if bool(ok):
-        return RESULTS.successful
-    return RESULTS.degenerate if method == "I" else RESULTS.not_positive_definite
-
-
-def conditioning_from_K(K, a: float = 1.0) -> np.ndarray:
-    """The isotropic normalisation ``T = K'^-1`` for an estimate ``K`` (``K' = A K`` with
-    the aspect-ratio map ``A = diag(1/a, 1, 1)``): in those coordinates omega is close
-    to the identity, the best conditioning for Method II's linear system."""
-    K = np.asarray(K)
-    s, cx, cy = K[1, 1], K[0, 2] / a, K[1, 2]
-    return np.array([[1 / s, 0, -cx / s], [0, 1 / s, -cy / s], [0, 0, 1.0]])
-
-
-def linear_calibration(homologies, method: str, T: np.ndarray, aspect_ratio=None, weights=None):
-    """Run a linear method on fitted homologies (pixels).  Returns ``(K, omega, code)``.
-
-    ``T`` is the isotropic normalising similarity of the pixels (e.g.
-    :func:`sorjax._camera.normalising_transform` of all outline points).  Methods
-    IIa/IIb are solved twice: once in ``T``'s coordinates, then again in coordinates
-    normalised by that first estimate (or by Method I's when the first is not
-    positive definite), where omega is near the identity and the algebraic error is
-    balanced between its entries (the same conditioning idea as Hartley's
-    normalisation; it lowered IIb's focal error by about a quarter on the two-sphere
-    scene at sigma = 2 px)."""
-    a = 1.0 if aspect_ratio is None else float(aspect_ratio)
-    v, l = _stacked_homologies(homologies)
-    # the pure core (sorjax._linear.linear_estimate); host conversion only here
-    K, omega, ok = linear_estimate(v, l, np.ones(len(v), bool), np.asarray(T), a, method=method, weights=weights)
-    return K, omega, _linear_code(ok, method)
-
-
-def _bundle_calibration(outs, homologies, T, aspect_ratio, n_samples):
-    """Seed the 2V+4 (or 2V+3) bundle with every linear method that succeeds (IIa,
-    IIb and I; with a known aspect ratio their estimates are projected onto it): one
-    linear seed can be far off when a view is weak, so :func:`fit_bundle` screens
-    them all and polishes the best.  With no positive-definite linear seed, a spread
-    of plausible cameras.
-
-    Returns ``(K, omega, code, cov, cost, view_rms, steps, v_x, l_s, s_px, evidence)``;
-    ``K`` is the raw estimate (not yet masked on failure), ``s_px`` the residual
-    standard error, ``evidence = (delta_px2, n)`` the cost (px^2) by which the best
-    camera with no perspective fits worse (:func:`sorjax._bundle.orthographic_cost`)
-    and the number of samples it is summed over."""
-    v, l = _stacked_homologies(homologies)
-    used = np.ones(len(outs), bool)
-    aspect = np.nan if aspect_ratio is None else float(aspect_ratio)
-    # the pure core (sorjax._bundle): seeds, fit, covariance, evidence in one program each
-    seeds, seed_ok = bundle_seeds(v, l, used, np.asarray(T), aspect)
-    out = bundle_estimate(_normalised_points(outs, T), used, _inlier_mask(homologies, n_samples),
-                          _axes_normalised(homologies, T), seeds, seed_ok, aspect, np.asarray(T),
-                          Options(n_samples=n_samples))
-    code = RESULTS.successful if bool(out.ok) else RESULTS.not_converged
-    evidence = (float(out.evidence), float(out.n))
-    return (out.K, out.omega, code, out.cov, out.cost, out.view_rms, int(out.steps), out.v_x, out.l_s,
-            float(np.sqrt(out.s2)), evidence)
-
-
-def _linearised_covariance(outs, homologies, K, T, aspect_ratio, n_samples):
-    """Covariance of ``(fu, fv, u0, v0)`` per px^2 of symmetry residual, for a linear
-    method's estimate ``K``: the bundle's linearisation (:func:`sorjax._bundle.covariance`)
-    at ``K`` with the per-view fits' axes.  It measures how well these views
-    determine the intrinsics whatever the estimator (infinite where they don't)."""
-    cov = linearised_covariance(_normalised_points(outs, T), np.ones(len(outs), bool), _inlier_mask(homologies, n_samples),
-                                _axes_normalised(homologies, T), np.asarray(K), np.asarray(T),
-                                np.nan if aspect_ratio is None else float(aspect_ratio), n_samples)
-    return np.asarray(cov)
-
-
-def _perspective(evidence, s_px: float, outline_error: float):
-    """``(ok, g_px, z)``: the evidence for perspective ``(delta_px2, n)`` as an RMS per
-    sample ``g_px`` and a z-score ``sqrt(delta) / s_px``, and whether it passes the gate
-    (``z >= PERSPECTIVE_Z`` and ``g_px >= PERSPECTIVE_FACTOR * outline_error``)."""
-    delta, n = evidence
-    g = math.sqrt(max(delta, 0.0) / max(n, 1.0))
-    z = math.sqrt(max(delta, 0.0)) / max(s_px, 1e-300)
-    return bool(z >= PERSPECTIVE_Z and g >= PERSPECTIVE_FACTOR * float(outline_error)), g, z
-
-
-def _inlier_mask(homologies, n_samples: int) -> np.ndarray:
-    """(V, N) 0/1: the samples each view's robust fit kept (all where it gives none).
-    Sample ``k`` is at the same curve parameter in the per-view fit and in the bundle
-    (both take ``n_samples`` points of the same spline), so the masks carry over."""
-    rows = []
-    for h in homologies:
-        m = None if h.inliers is None else np.asarray(h.inliers, dtype=np.float64)
-        rows.append(m if m is not None and m.shape == (n_samples,) else np.ones(n_samples))
-    return np.stack(rows)
-
-
-def _normalised_points(outs, T) -> np.ndarray:
-    """(V, M, 2) outline points in the coordinates of the similarity ``T``."""
-    return transform_points(T, np.stack([np.asarray(o.points) for o in outs]))
-
-
-def _axes_normalised(homologies, T) -> np.ndarray:
-    """(V, 3) per-view axes ``l_s`` in the coordinates of ``T`` (lines map by ``T^-T``)."""
-    return np.stack([np.linalg.solve(T.T, np.asarray(h.l_s)) for h in homologies])
-
-
 # ------------------------------------------------------------ degenerate geometry
 
 # A view is dropped as "not a surface of revolution" when its per-view symmetry
@@ -264,9 +158,10 @@ def _axes_normalised(homologies, T) -> np.ndarray:
 # outlines are caught: a mild asymmetry is indistinguishable from noise by this
 # residual.  Between WARN_ASYMMETRY_PX and the
 # threshold the view is kept with a warning.
-ASYMMETRY_PX = 2.0
-ASYMMETRY_REL = 0.01
-WARN_ASYMMETRY_PX = 1.0
+_O = Options()  # the defaults; the values live in sorjax.core.Options
+ASYMMETRY_PX = _O.asymmetry_px
+ASYMMETRY_REL = _O.asymmetry_rel
+WARN_ASYMMETRY_PX = _O.warn_asymmetry_px
 # The robust per-view fit trims samples with no mirror image (a handle, a shadow); a
 # view that needs more than MAX_TRIMMED of its samples trimmed is not a surface of
 # revolution, and from NOTE_TRIMMED on the trimming is reported.  Measured: a smooth
@@ -274,14 +169,14 @@ WARN_ASYMMETRY_PX = 1.0
 # image); GrabCut outlines of ycb-video cans that leaked into the background trimmed
 # 15-22 % and, kept, gave a confident wrong K: hence 20 %, and the symmetry test on the
 # untrimmed residual.
-MAX_TRIMMED = 0.2
-NOTE_TRIMMED = 0.02
+MAX_TRIMMED = _O.max_trimmed
+NOTE_TRIMMED = _O.note_trimmed
 # An intrinsic is "not determined" when its standard deviation (the covariance at the
 # estimate, scaled by the residual -- at least RESIDUAL_FLOOR_PX when every v_x is at
 # infinity) is infinite or above UNDETERMINED times the focal length (for the
 # principal point: times the outlines' RMS radius when the focal length itself is not
 # determined): a 3-sigma interval reaching zero.
-UNDETERMINED = 1.0 / 3.0
+UNDETERMINED = _O.undetermined
 # A focal length below MIN_FOCAL_FRACTION of the extent of the outlines (their
 # bounding box's larger side, px) would put them across more than 90 degrees of view,
 # where a lens without distortion (sorjax's model) is implausible: a collapsed
@@ -289,19 +184,19 @@ UNDETERMINED = 1.0 / 3.0
 # on real photographs with weak perspective and imperfect outlines: f fell to 1..25 px,
 # and to 168 px (nocs-real275, true 590) and 177 px (ycb-video, true 1067) with a std
 # of 13-15 px and the principal point 7 to 20 std off.
-MIN_FOCAL_FRACTION = 0.5
+MIN_FOCAL_FRACTION = _O.min_focal_fraction
 # With the image size known (``calibrate(image_size=...)``), an estimate is also
 # implausible when it gives the image a field of view above MAX_FOV_DEG across (wider
 # lenses are fisheyes, far from a pinhole without distortion) or puts the principal
 # point outside the image.  (ycb-video, true f 1067 px: f 177 +- 13 px, a 122 deg view
 # of its 640 px width -- caught only by this bound, narrowly.)
-MAX_FOV_DEG = 120.0
+MAX_FOV_DEG = _O.max_fov_deg
 # Weak geometry: warn when the relative standard deviation of a focal length exceeds
 # WEAK_REL_STD, the covariance scaled by the residual but at least RESIDUAL_FLOOR_PX
 # (about the accuracy of good sub-pixel outlines), so that a configuration that only
 # noise-free outlines could calibrate is flagged too.
-WEAK_REL_STD = 0.05
-RESIDUAL_FLOOR_PX = 0.1
+WEAK_REL_STD = _O.weak_rel_std
+RESIDUAL_FLOOR_PX = _O.residual_floor_px
 # Perspective evidence (bundle).  Only perspective fixes the focal length, and under
 # weak perspective an outline shows very little of it (a 5 % focal error changes the
 # symmetry of typical outlines by about 0.25 px).  Systematic errors of the outlines
@@ -318,9 +213,9 @@ RESIDUAL_FLOOR_PX = 0.1
 # gave f 271 +- 16 px for a true 616 without this gate; the two-sphere scene shows 0.7
 # to 0.8 px at f = 700 and 0.14 to 0.28 px at f = 1400 (1 to 2 px of noise); rendered
 # objects near the image centre at f = 1250 to 1500 px 0.23 to 0.24 px.
-OUTLINE_ERROR_PX = 0.1
-PERSPECTIVE_Z = 3.0
-PERSPECTIVE_FACTOR = 3.0
+OUTLINE_ERROR_PX = _O.outline_error_px
+PERSPECTIVE_Z = _O.perspective_z
+PERSPECTIVE_FACTOR = _O.perspective_factor
 # Advice thresholds (which extra view would help).
 PARALLEL_AXES_DEG = 10.0
 NEAR_AXIS_DEG = 10.0
@@ -396,24 +291,6 @@ def _advice(K, vx, ls, outs, free_aspect: bool, aspect_weak: bool, used=None) ->
     return tips
 
 
-def _ls_intersection(ls: np.ndarray):
-    """Least-squares intersection of lines (V, 3) (``a^2 + b^2 = 1``): ``(point, cov,
-    spread_deg)``; ``cov`` is NaN with fewer than 3 lines, ``point`` NaN when they
-    are (nearly) parallel."""
-    A, b = ls[:, :2], -ls[:, 2]
-    N = A.T @ A
-    spread = _axis_spread_deg(ls)
-    if spread < 1.0:
-        return np.full(2, np.nan), np.full((2, 2), np.nan), spread
-    x = np.linalg.solve(N, A.T @ b)
-    if len(ls) >= 3:
-        s2 = float(np.sum((A @ x - b) ** 2)) / (len(ls) - 2)
-        cov = s2 * np.linalg.inv(N)
-    else:
-        cov = np.full((2, 2), np.nan)
-    return x, cov, spread
-
-
 def _fmt_std(x, sd):
     """``x +- sd`` in px: one decimal, or 3 significant digits beyond 1e6 px (a focal
     length that ran off towards the no-perspective limit)."""
@@ -421,86 +298,35 @@ def _fmt_std(x, sd):
     return f"{xs} +- {sd:.2g}" if np.isfinite(sd) else f"{xs} +- inf"
 
 
-def _assess(K, cov_unit, s_px, outs, vx, ls, free_aspect: bool, used=None, floor_verdict: bool = False,
-            perspective_ok: bool = True, image_size=None):
-    """Which intrinsics the views determine.  Returns ``(determined (4,) bool, std (4,),
-    weak or None, advice)`` for the raw estimate ``K`` (pixels), the covariance per
-    px^2 of residual ``cov_unit`` and the residual standard error ``s_px``.  ``std``
-    and the verdicts are for ``s_px`` -- or, with ``floor_verdict`` (every ``v_x`` at
-    infinity, where theory says the focal length is free), for
-    ``max(s_px, RESIDUAL_FLOOR_PX)``, so that the estimate must fix the focal length
-    robustly to override that.  ``weak`` is the relative std of a focal length at
-    ``max(s_px, RESIDUAL_FLOOR_PX)`` when above ``WEAK_REL_STD``.  Without enough
-    evidence for perspective (``perspective_ok`` False), with a collapsed focal length
-    (below ``MIN_FOCAL_FRACTION`` of the outlines' extent) or with the principal point
-    outside the image or a field of view above ``MAX_FOV_DEG`` (``image_size = (width,
-    height)``, when given) nothing is determined: such an estimate rests on systematic
-    errors of the outlines, not on their perspective."""
-    K = np.asarray(K)
-    est = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
-    var = np.diag(np.asarray(cov_unit))
-    s_floor = max(s_px, RESIDUAL_FLOOR_PX)
-    std = np.where(np.isfinite(var), np.sqrt(np.abs(var)), np.inf) * s_px
-    std_floor = std / max(s_px, 1e-300) * s_floor
-    judged = std_floor if floor_verdict else std
-    radius = np.sqrt(np.mean([_outline_radius(o) ** 2 for o in outs]))
-    plausible = not _implausible(est, outs, image_size)
-    focal_ok = np.isfinite(std[:2]) & (judged[:2] <= UNDETERMINED * np.abs(est[:2]))
-    ref = np.sqrt(abs(est[0] * est[1])) if focal_ok.all() else radius
-    pp_ok = np.isfinite(std[2:]) & (judged[2:] <= UNDETERMINED * ref)
-    determined = np.concatenate([focal_ok, pp_ok]) & plausible & perspective_ok
-    weak = None
-    rel_floor = std_floor[:2] / np.abs(est[:2])
-    aspect_weak = free_aspect and not determined.all()
-    if determined.all() and np.max(rel_floor) > WEAK_REL_STD:
-        weak = float(np.max(rel_floor))
-        if free_aspect:  # relative std of fu / fv
-            c = np.asarray(cov_unit)
-            q = c[0, 0] / est[0] ** 2 + c[1, 1] / est[1] ** 2 - 2 * c[0, 1] / (est[0] * est[1])
-            aspect_weak = bool(np.sqrt(max(q, 0.0)) * s_floor > WEAK_REL_STD)
-    advice = _advice(K, vx, ls, outs, free_aspect, aspect_weak, used)
-    return determined, std, weak, advice
-
-
-def _implausible(est, outs, image_size=None) -> str:
-    """Why the estimate ``(fu, fv, u0, v0)`` (px) is implausible for a camera without
-    lens distortion that took these outlines (empty when it is not)."""
+def _implausible_text(code: int, est, outs, image_size=None) -> str:
+    """The text of :func:`sorjax.core._assess.implausible`'s ``code`` for the estimate
+    ``est = (fu, fv, u0, v0)`` (px) and the outlines ``outs`` (empty when plausible)."""
+    if code == USED:
+        return ""
     pts = np.concatenate([np.asarray(getattr(o, "points", o)).reshape(-1, 2) for o in outs])
     extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
     f = float(np.min(np.abs(est[:2])))
-    if f < MIN_FOCAL_FRACTION * extent:
+    if code == COLLAPSED_FOCAL:
         deg = 2.0 * math.degrees(math.atan(extent / (2.0 * max(f, 1e-300))))
         return (
             f"the estimate (f = {f:.0f} px) would put outlines {extent:.0f} px apart across {deg:.0f} deg of "
             "view, which a lens without distortion does not do: the outlines' errors, not their "
             "perspective, made it"
         )
-    if image_size is not None:
-        w, h = image_size
+    w, h = image_size if image_size is not None else (math.nan, math.nan)
+    if code == WIDE_FOV:
         fov = [2.0 * math.degrees(math.atan(n / (2.0 * max(abs(x), 1e-300)))) for n, x in ((w, est[0]), (h, est[1]))]
-        if max(fov) > MAX_FOV_DEG:
-            return (
-                f"the estimate (fu = {est[0]:.0f}, fv = {est[1]:.0f} px) gives the {w}x{h} image a field of view of "
-                f"{fov[0]:.0f} x {fov[1]:.0f} deg, beyond what lenses without distortion reach "
-                f"({MAX_FOV_DEG:g} deg): the outlines' errors, not their perspective, made it"
-            )
-        if not (-0.5 <= est[2] <= w - 0.5 and -0.5 <= est[3] <= h - 0.5):
-            return (
-                f"the estimated principal point ({est[2]:.0f}, {est[3]:.0f}) lies outside the {w}x{h} image: "
-                "the outlines' errors, not their perspective, made it"
-            )
-    return ""
-
-
-def _nan_calibration(homologies, result, method, a, used, details, dropped, notes, K=None, cov=None, rms=None,
-                     vx=None, ls=None):
-    nan3, nan4 = jnp.full((3, 3), jnp.nan), jnp.full((4, 4), jnp.nan)
-    return Calibration(
-        nan3 if K is None else jnp.asarray(K), nan3, homologies, result, nan4 if cov is None else jnp.asarray(cov),
-        jnp.asarray(jnp.nan), jnp.zeros((0,)) if rms is None else jnp.asarray(rms), jnp.asarray(0),
-        jnp.zeros((0, 3)) if vx is None else jnp.asarray(vx), jnp.zeros((0, 3)) if ls is None else jnp.asarray(ls),
-        method, a, tuple(used), details, tuple(dropped), tuple(notes),
-    )
+        return (
+            f"the estimate (fu = {est[0]:.0f}, fv = {est[1]:.0f} px) gives the {w}x{h} image a field of view of "
+            f"{fov[0]:.0f} x {fov[1]:.0f} deg, beyond what lenses without distortion reach "
+            f"({MAX_FOV_DEG:g} deg): the outlines' errors, not their perspective, made it"
+        )
+    if code == PP_OUTSIDE:
+        return (
+            f"the estimated principal point ({est[2]:.0f}, {est[3]:.0f}) lies outside the {w}x{h} image: "
+            "the outlines' errors, not their perspective, made it"
+        )
+    return ""  # pragma: no cover
 
 
 def _check_sizes(n_samples, n_points):
@@ -532,6 +358,203 @@ def _check_homologies(homologies, n_views):
                     "pass the results of sorjax.fit_homology (or homologies=None)."
                 )
     return homologies
+
+
+
+
+# ------------------------------------------------------------- messages (the edge)
+
+
+def code_name(result) -> str:
+    """The name of a :class:`RESULTS` item (also one read back as numpy)."""
+    v = int(np.asarray(result._value))
+    for name, item in RESULTS._name_to_item.items():
+        if int(item._value) == v:
+            return name
+    return "unknown"  # pragma: no cover
+
+
+def _code_item(result):
+    return RESULTS._name_to_item[code_name(result)]
+
+
+def view_notes(h, drop_reason, names=None) -> list[str]:
+    """The per-view warnings of a calibration, from the per-view homologies ``h``
+    (:class:`sorjax.core.ViewHomologies`, numpy) and the core's drop reasons: fits
+    that did not converge, views dropped (conic, not symmetric) and kept with a
+    caveat (trimmed, high residual)."""
+    names = names or [f"view {i}" for i in range(len(drop_reason))]
+    o = Options()
+    notes = []
+    for i, name in enumerate(names):
+        if not bool(h.converged[i]):
+            notes.append(f"{name}: the homology fit did not converge (rms {float(h.rms[i]):.3g} px).")
+    for i, name in enumerate(names):
+        rms = max(float(h.rms[i]), float(h.rms_untrimmed[i]))
+        d, tr = int(drop_reason[i]), float(h.trimmed[i])
+        if d == CONIC:
+            notes.append(
+                f"{name}: the outline is a conic to within {float(h.conic_rms[i]):.2g} px (its symmetry "
+                f"residual is {rms:.2g} px), like a sphere or a bowl seen from above showing "
+                "only its rim: infinitely many homologies fit it, so it carries no calibration "
+                "information (paper, Section 6). Dropped; use views where the body's profile shows."
+            )
+        elif d == TRIMMED:
+            notes.append(
+                f"{name}: the outline is not symmetric: {100 * tr:.0f} % of its samples have no "
+                f"mirror image under the best harmonic homology (more than {100 * o.max_trimmed:.0f} % "
+                "cannot be a handle or a shadow on a surface of revolution). Dropped; check the "
+                "segmentation of this view."
+            )
+        elif d == ASYMMETRIC:
+            notes.append(
+                f"{name}: the outline is not symmetric: its best harmonic homology leaves an RMS "
+                f"symmetry residual of {rms:.3g} px (a surface of revolution with up to 2 px of noise "
+                f"stays below about {o.asymmetry_px:g} px), so it is not the outline of a surface of "
+                "revolution (or it is broken, occluded or merged with something else). Dropped; "
+                "check the segmentation of this view."
+            )
+        elif d == USED:
+            if tr >= o.note_trimmed:
+                notes.append(
+                    f"{name}: {100 * tr:.0f} % of the outline's samples have no mirror image (a "
+                    "handle, a shadow, an occlusion?) and were left out of the fit."
+                )
+            if rms > o.warn_asymmetry_px:
+                notes.append(
+                    f"{name}: high symmetry residual ({rms:.3g} px): a noisy outline, or not quite a "
+                    "surface of revolution; kept. Check its segmentation."
+                )
+    return notes
+
+
+def dropped_views(h, drop_reason) -> tuple[tuple[int, str], ...]:
+    """``(view index, reason)`` of each view the core left out."""
+    out = []
+    for i, d in enumerate(np.asarray(drop_reason)):
+        rms = max(float(h.rms[i]), float(h.rms_untrimmed[i]))
+        if d == CONIC:
+            out.append((i, "conic outline"))
+        elif d == TRIMMED:
+            out.append((i, f"not symmetric ({100 * float(h.trimmed[i]):.0f} % of the outline trimmed)"))
+        elif d == ASYMMETRIC:
+            out.append((i, f"not symmetric (rms {rms:.3g} px)"))
+        elif d == MASKED:
+            out.append((i, "left out by the caller"))
+    return tuple(out)
+
+
+def _advice_for(r, points, free_aspect: bool) -> list[str]:
+    used = np.flatnonzero(np.asarray(r.used))
+    return _advice(np.asarray(r.K_raw), np.asarray(r.v_x)[used], np.asarray(r.l_s)[used],
+                   [points[i] for i in used], free_aspect, bool(r.aspect_weak), list(used))
+
+
+def verdict_notes(r, method: str, a, points=None) -> list[str]:
+    """The warning of a successful but weak calibration (its focal length uncertain by
+    more than ``Options.weak_rel_std``), from the core's result ``r`` (numpy)."""
+    if code_name(r.result) != "successful" or not np.isfinite(float(r.weak)):
+        return []
+    tips = ("; ".join(_advice_for(r, points, a is None)) + ".") if points is not None else "add views."
+    return [
+        f"weak geometry: the focal length is uncertain by {100 * float(r.weak):.3g} % (1 sigma, for a "
+        f"symmetry residual of {max(float(r.s_px), Options().residual_floor_px):.2g} px): " + tips
+    ]
+
+
+def details_for(r, h, points, method: str, a, outline_error: float, image_size=None) -> str:
+    """What is specific to a result that is not a plain success (``Calibration.details``)."""
+    name = code_name(r.result)
+    used = np.flatnonzero(np.asarray(r.used))
+    drop = np.asarray(r.drop_reason)
+    vs = ", ".join(str(i) for i in used)
+    if name == "too_few_views":
+        why = "; ".join(f"view {i}: {reason}" for i, reason in dropped_views(h, drop))
+        return (f"{len(drop)} views given, {len(used)} usable ({why}). A single view gives only two "
+                "constraints on the four intrinsics.")
+    if bool(r.all_at_infinity) and name in ("only_principal_point", "degenerate") and not np.any(r.determined):
+        K = np.asarray(r.K)
+        if not np.all(np.isfinite(K[:2, 2])):
+            return (f"Every view's v_x is at infinity (views {vs}) and their imaged axes are parallel "
+                    f"(within {float(r.axes_spread_deg):.2g} deg), so not even the principal point is determined. "
+                    "Add a view with the object away from the image centre.")
+        sd = np.sqrt(np.diag(np.asarray(r.covariance))[2:])
+        return (f"Every view's v_x is at infinity (views {vs}): the imaged axes meet at the principal "
+                f"point ({_fmt_std(K[0, 2], sd[0])}, {_fmt_std(K[1, 2], sd[1])}) px; the focal length is not "
+                "determined.")
+    det = np.asarray(r.determined)
+    if name in ("only_principal_point", "degenerate") and not det.all() and np.all(np.isfinite(np.asarray(r.K_raw))):
+        Kr = np.asarray(r.K_raw)
+        est = [Kr[0, 0], Kr[1, 1], Kr[0, 2], Kr[1, 2]]
+        std = np.asarray(r.std)
+        d_ = ", ".join(f"{n} = {_fmt_std(x, s)} px" for n, x, s, d in zip(_NAMES, est, std, det) if d)
+        u_ = ", ".join(f"{n} ({_fmt_std(x, s)} px)" for n, x, s, d in zip(_NAMES, est, std, det) if not d)
+        why = _implausible_text(int(r.implausible), np.array(est), [points[i] for i in used], image_size)
+        why = f" Not a plausible camera: {why}." if why else ""
+        if not bool(r.perspective_ok):
+            z, g = float(r.perspective_z), float(r.perspective_px)
+            o = Options()
+            why += (
+                f" The outlines show too little perspective to fix the focal length: the best camera with "
+                f"no perspective fits them only {g:.2g} px RMS worse (z = {z:.2g}), which "
+                + (f"noise alone could do (needs z >= {o.perspective_z:g})" if z < o.perspective_z else
+                   f"a systematic outline error of {float(outline_error):g} px (outline_error) could do "
+                   f"(needs >= {o.perspective_factor * float(outline_error):.2g} px)")
+                + "."
+            )
+        advice = _advice_for(r, points, a is None)
+        return (f"Not determined by these views: {u_}" + (f"; determined: {d_}" if d_ else "") + "." + why
+                + " To fix it: " + "; ".join(advice) + ".")
+    return ""
+
+
+# ------------------------------------------------------------------ the core call
+
+
+def _bucket(n: int) -> int:
+    """The padded view count for ``n`` views: 2, 4, 8, ... (one compiled program each)."""
+    return max(2, 1 << (n - 1).bit_length())
+
+
+def view_homologies(homologies, n_samples: int) -> ViewHomologies:
+    """Stack :class:`Homology` fits (numpy) into the core's :class:`ViewHomologies`;
+    hand-built ones (no robust-fit fields) count as untrimmed, finite vertex unless
+    ``|v_x[2]| < 1e-9``."""
+    def row(h):
+        inl = None if h.inliers is None else np.asarray(h.inliers, bool)
+        if inl is None or inl.shape != (n_samples,):
+            inl = np.ones(n_samples, bool)
+        rms = float(h.rms)
+        v, l = np.asarray(h.v_x, np.float64), np.asarray(h.l_s, np.float64)
+        return dict(
+            v_x=v, l_s=l, W=np.asarray(h.W, np.float64), rms=np.float64(rms), cost=np.float64(float(h.cost)),
+            rms_untrimmed=np.float64(rms if h.rms_untrimmed is None else float(h.rms_untrimmed)),
+            conic_rms=np.float64(float(h.conic_rms)), trimmed=np.float64(h.trimmed),
+            infinity_z=np.float64(np.inf if h.infinity_z is None else float(h.infinity_z)),
+            at_infinity=np.bool_(h.v_x_at_infinity), is_conic=np.bool_(h.is_conic),
+            converged=np.bool_(bool(h.converged)), steps=np.int32(int(h.steps)), inliers=inl,
+        )
+    rows = [row(h) for h in homologies]
+    return ViewHomologies(**{k: np.stack([r[k] for r in rows]) for k in rows[0]})
+
+
+@functools.partial(jax.jit, static_argnames=("method",))
+def _core(points, homs, method, aspect, options, image_size, valid):
+    return calibrate_homologies(points, homs, method, aspect, options=options, image_size=image_size, valid=valid)
+
+
+def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, options: Options, image_size):
+    """The core on ``V`` views padded to :func:`_bucket` (copies of view 0, masked);
+    returns the result as numpy, cut back to ``V`` views."""
+    V = points.shape[0]
+    B = _bucket(V)
+    pad = lambda x: np.concatenate([x, np.repeat(x[:1], B - V, axis=0)]) if B > V else x  # noqa: E731
+    valid = np.arange(B) < V
+    r = _core(pad(points), jax.tree_util.tree_map(pad, homs), method, np.float64(aspect), options,
+              np.asarray(image_size, np.float64), valid)
+    r = jax.tree_util.tree_map(np.asarray, r)
+    per_view = ("used", "drop_reason", "view_rms", "v_x", "l_s")
+    return eqx.tree_at(lambda x: [getattr(x, k) for k in per_view], r, [getattr(r, k)[:V] for k in per_view])
 
 
 def calibrate(
@@ -624,175 +647,29 @@ def calibrate(
             "moved or tilted, or another object)."
         )
     homologies = _check_homologies(homologies, len(outs))
-    notes: list[str] = []
-
-    def note(msg):
-        notes.append(msg)
-        warnings.warn(msg, stacklevel=3)
-
     if homologies is None:
         homologies = tuple(fit_homology(o, n_samples=n_samples, n_points=n_points) for o in outs)
-    for i, h in enumerate(homologies):
-        if not bool(h.converged):
-            note(f"view {i}: the homology fit did not converge (rms {float(h.rms):.3g} px).")
-    used, dropped = [], []
-    for i, h in enumerate(homologies):
-        rms, radius = float(h.rms), _outline_radius(outs[i])
-        if h.rms_untrimmed is not None:  # symmetric at all? judged before any trimming
-            rms = max(rms, float(h.rms_untrimmed))
-        if h.is_conic:
-            note(
-                f"view {i}: the outline is a conic to within {float(h.conic_rms):.2g} px (its symmetry "
-                f"residual is {rms:.2g} px), like a sphere or a bowl seen from above showing "
-                "only its rim: infinitely many homologies fit it, so it carries no calibration "
-                "information (paper, Section 6). Dropped; use views where the body's profile shows."
-            )
-            dropped.append((i, "conic outline"))
-        elif h.trimmed > MAX_TRIMMED:
-            note(
-                f"view {i}: the outline is not symmetric: {100 * h.trimmed:.0f} % of its samples have no "
-                f"mirror image under the best harmonic homology (more than {100 * MAX_TRIMMED:.0f} % "
-                "cannot be a handle or a shadow on a surface of revolution). Dropped; check the "
-                "segmentation of this view."
-            )
-            dropped.append((i, f"not symmetric ({100 * h.trimmed:.0f} % of the outline trimmed)"))
-        elif not np.isfinite(rms) or (rms > ASYMMETRY_PX and rms > ASYMMETRY_REL * radius):
-            note(
-                f"view {i}: the outline is not symmetric: its best harmonic homology leaves an RMS "
-                f"symmetry residual of {rms:.3g} px (a surface of revolution with up to 2 px of noise "
-                f"stays below about {ASYMMETRY_PX:g} px), so it is not the outline of a surface of "
-                "revolution (or it is broken, occluded or merged with something else). Dropped; "
-                "check the segmentation of this view."
-            )
-            dropped.append((i, f"not symmetric (rms {rms:.3g} px)"))
-        else:
-            if h.trimmed >= NOTE_TRIMMED:
-                note(
-                    f"view {i}: {100 * h.trimmed:.0f} % of the outline's samples have no mirror image (a "
-                    "handle, a shadow, an occlusion?) and were left out of the fit."
-                )
-            if rms > WARN_ASYMMETRY_PX:
-                note(
-                    f"view {i}: high symmetry residual ({rms:.3g} px): a noisy outline, or not quite a "
-                    "surface of revolution; kept. Check its segmentation."
-                )
-            used.append(i)
     homologies = tuple(homologies)
+    options = Options(n_samples=n_samples, outline_error_px=float(outline_error))
     a = None if method in ("IIa",) or (method == "bundle" and aspect_ratio is None) else (
         1.0 if aspect_ratio is None else float(aspect_ratio)
     )
-    free_aspect = a is None
+    points = np.stack([np.asarray(o.points, np.float64) for o in outs])
+    homs = view_homologies(homologies, n_samples)
+    r = _run_core(points, homs, method, math.nan if aspect_ratio is None else float(aspect_ratio), options,
+                  (math.nan, math.nan) if image_size is None else image_size)
 
-    def finish(cal):
-        if throw and not cal.success:
-            raise CalibrationError(cal.message)
-        return cal
-
-    if len(used) < 2:
-        why = "; ".join(f"view {i}: {r}" for i, r in dropped)
-        details = (
-            f"{len(outs)} views given, {len(used)} usable ({why}). A single view gives only two "
-            "constraints on the four intrinsics."
-        )
-        return finish(_nan_calibration(homologies, RESULTS.too_few_views, method, a, used, details, dropped, notes))
-    outs_u = [outs[i] for i in used]
-    homs_u = tuple(homologies[i] for i in used)
-    rms_u = jnp.stack([h.rms for h in homs_u])
-    vx_h = np.stack([np.asarray(h.v_x) for h in homs_u])
-    ls_h = np.stack([np.asarray(h.l_s) for h in homs_u])
-
-    def principal_point_only():
-        """Every v_x at infinity and the estimate cannot fix the focal length: the
-        principal point is where the imaged axes meet (paper, Section 6)."""
-        pp, cov_pp, spread = _ls_intersection(ls_h)
-        vs = ", ".join(str(i) for i in used)
-        if not np.all(np.isfinite(pp)):
-            details = (
-                f"Every view's v_x is at infinity (views {vs}) and their imaged axes are parallel "
-                f"(within {spread:.2g} deg), so not even the principal point is determined. Add a view "
-                "with the object away from the image centre."
-            )
-            return finish(_nan_calibration(homologies, RESULTS.degenerate, method, a, used, details, dropped, notes,
-                                           rms=rms_u, vx=vx_h, ls=ls_h))
-        K = np.array([[np.nan, 0.0, pp[0]], [0.0, np.nan, pp[1]], [0.0, 0.0, 1.0]])
-        cov = np.full((4, 4), np.nan)
-        cov[0, 0] = cov[1, 1] = np.inf
-        cov[2:, 2:] = cov_pp
-        sd = np.sqrt(np.diag(cov_pp))
-        details = (
-            f"Every view's v_x is at infinity (views {vs}): the imaged axes meet at the principal "
-            f"point ({_fmt_std(pp[0], sd[0])}, {_fmt_std(pp[1], sd[1])}) px; the focal length is not "
-            "determined."
-        )
-        return finish(_nan_calibration(homologies, RESULTS.only_principal_point, method, a, used, details, dropped,
-                                       notes, K=K, cov=cov, rms=rms_u, vx=vx_h, ls=ls_h))
-
-    # every v_x at infinity (within its uncertainty): only the principal point is
-    # estimable, unless the joint estimate below does determine the focal length
-    all_at_infinity = all(h.v_x_at_infinity for h in homs_u)
-    T = normalising_transform(np.concatenate([np.asarray(o.points) for o in outs_u]))
-    perspective_ok, g_px, z_persp = True, math.nan, math.nan
-    if method == "bundle":
-        K, omega, code, cov, cost, view_rms, steps, vx, ls, s_px, evidence = _bundle_calibration(
-            outs_u, homs_u, T, aspect_ratio, n_samples
-        )
-        cov_unit = np.asarray(cov) / max(s_px, 1e-300) ** 2
-        perspective_ok, g_px, z_persp = _perspective(evidence, s_px, outline_error)
-    else:
-        K, omega, code = linear_calibration(homs_u, method, T, aspect_ratio)
-        cov = jnp.full((4, 4), jnp.nan)
-        cost, view_rms, steps, vx, ls = jnp.asarray(jnp.nan), rms_u, jnp.asarray(0), jnp.asarray(vx_h), jnp.asarray(ls_h)
-        s_px = float(np.sqrt(np.mean(np.asarray(rms_u) ** 2)))
-        cov_unit = None
-        if bool(code == RESULTS.successful) and np.all(np.isfinite(np.asarray(K))):
-            cov_unit = _linearised_covariance(outs_u, homs_u, K, T, a, n_samples)
-
-    details = ""
-    K_np = np.asarray(K)
-    assessed = cov_unit is not None and np.all(np.isfinite(K_np)) and K_np[0, 0] > 0 and K_np[1, 1] > 0
-    if assessed:
-        determined, std, weak, advice = _assess(
-            K_np, cov_unit, s_px, outs_u, np.asarray(vx), np.asarray(ls), free_aspect, used, all_at_infinity,
-            perspective_ok, image_size,
-        )
-    if all_at_infinity and (not bool(code == RESULTS.successful) or not assessed or not determined[:2].all()):
-        return principal_point_only()
-    if assessed:
-        est = [K_np[0, 0], K_np[1, 1], K_np[0, 2], K_np[1, 2]]
-        if not determined.all():
-            code = RESULTS.only_principal_point if (not determined[:2].any() and determined[2:].all()) else RESULTS.degenerate
-            det = ", ".join(f"{n} = {_fmt_std(x, sd)} px" for n, x, sd, d in zip(_NAMES, est, std, determined) if d)
-            und = ", ".join(f"{n} ({_fmt_std(x, sd)} px)" for n, x, sd, d in zip(_NAMES, est, std, determined) if not d)
-            why = _implausible(np.array(est), outs_u, image_size)
-            why = f" Not a plausible camera: {why}." if why else ""
-            if not perspective_ok:
-                why += (
-                    f" The outlines show too little perspective to fix the focal length: the best camera with "
-                    f"no perspective fits them only {g_px:.2g} px RMS worse (z = {z_persp:.2g}), which "
-                    + (f"noise alone could do (needs z >= {PERSPECTIVE_Z:g})" if z_persp < PERSPECTIVE_Z else
-                       f"a systematic outline error of {float(outline_error):g} px (outline_error) could do "
-                       f"(needs >= {PERSPECTIVE_FACTOR * float(outline_error):.2g} px)")
-                    + "."
-                )
-            details = (
-                f"Not determined by these views: {und}"
-                + (f"; determined: {det}" if det else "")
-                + "." + why + " To fix it: " + "; ".join(advice) + "."
-            )
-            mask = np.array([[not determined[0], False, not determined[2]], [False, not determined[1], not determined[3]],
-                             [False, False, False]])
-            K = jnp.asarray(np.where(mask, np.nan, K_np))
-        elif weak is not None and bool(code == RESULTS.successful):
-            note(
-                f"weak geometry: the focal length is uncertain by {100 * weak:.3g} % (1 sigma, for a "
-                f"symmetry residual of {max(s_px, RESIDUAL_FLOOR_PX):.2g} px): " + "; ".join(advice) + "."
-            )
-    if not bool(code == RESULTS.successful):
-        omega = jnp.full((3, 3), jnp.nan)
-        if not details:  # no analysis of what is determined: nothing is reported
-            K = jnp.full((3, 3), jnp.nan)
+    notes = view_notes(homs, r.drop_reason) + verdict_notes(r, method, a, outs)
+    for msg in notes:
+        warnings.warn(msg, stacklevel=2)
+    used = tuple(int(i) for i in np.flatnonzero(r.used))
+    details = details_for(r, homs, outs, method, a, outline_error, image_size)
     cal = Calibration(
-        K, omega, homologies, code, jnp.asarray(cov), jnp.asarray(cost), view_rms, jnp.asarray(steps), jnp.asarray(vx),
-        jnp.asarray(ls), method, a, tuple(used), details, tuple(dropped), tuple(notes), float(g_px), float(z_persp),
+        jnp.asarray(r.K), jnp.asarray(r.omega), homologies, _code_item(r.result), jnp.asarray(r.covariance),
+        jnp.asarray(r.cost), jnp.asarray(r.view_rms[r.used]), jnp.asarray(r.steps), jnp.asarray(r.v_x[r.used]),
+        jnp.asarray(r.l_s[r.used]), method, a, used, details, dropped_views(homs, r.drop_reason), tuple(notes),
+        float(r.perspective_px), float(r.perspective_z),
     )
-    return finish(cal)
+    if throw and not cal.success:
+        raise CalibrationError(cal.message)
+    return cal

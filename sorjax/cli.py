@@ -214,9 +214,11 @@ def _find_config(name: str) -> Path:
 
 def _experiment(args) -> int:
     from .experiment import load_config, run_experiment
+    from .experiment._runner import use_cpu_devices
 
     path = _find_config(args.config)
     cfg = load_config(path)
+    use_cpu_devices(cfg.workers if args.workers is None else args.workers)  # before JAX starts its backend
     res = run_experiment(cfg, out=args.out, trials=args.trials, seed=args.seed, workers=args.workers,
                          progress=not args.quiet, source=path.read_text())
     print((res.path / "table.md").read_text())
@@ -233,7 +235,7 @@ def _add_run_args(p):
     p.add_argument("--out", default="runs", help="folder for the run directories (default: runs)")
     p.add_argument("--trials", type=int, default=None, help="trials per row (overrides the config)")
     p.add_argument("--seed", type=int, default=None, help="seed (overrides the config)")
-    p.add_argument("--workers", type=int, default=None, help="worker processes (0: one per core)")
+    p.add_argument("--workers", type=int, default=None, help="CPU devices the trials are split over (0: one per core)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 

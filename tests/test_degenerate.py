@@ -310,30 +310,38 @@ def test_collapsed_focal_length_is_never_determined():
     # a focal length with a small std that would put the outlines across more than 90
     # degrees of view (seen on weak real photographs: 20 px, 168 px for a true 590) is
     # refused as undetermined, and so is the principal point estimated with it
-    from sorjax._calibration import _assess, _implausible
+    import jax.numpy as jnp
+
+    from sorjax._calibration import _implausible_text
+    from sorjax.core import Options
+    from sorjax.core._assess import COLLAPSED_FOCAL, PLAUSIBLE, WIDE_FOV, assess, implausible, outline_extent
 
     sc = scenes.two_spheres(700.0)
-    K = np.array([[20.0, 0, 320.0], [0, 20.0, 240.0], [0, 0, 1]])
-    vx = np.stack([v.v_x for v in sc.views])
-    ls = np.stack([v.l_s for v in sc.views])
     outs = [sorjax.make_outline(o) for o in sc.outlines]
-    extent = max(np.ptp(np.concatenate(sc.outlines), axis=0))
-    determined, std, _, _ = _assess(K, np.eye(4) * 1e-4, 0.5, outs, vx, ls, False)
-    assert not determined.any()
-    assert "deg of view" in _implausible(np.array([20.0, 20.0, 320.0, 240.0]), outs)
+    pts = jnp.stack([o.points for o in outs])
+    extent = float(outline_extent(pts, jnp.ones(len(outs), bool)))
+    assert np.isclose(extent, max(np.ptp(np.concatenate([np.asarray(o.points) for o in outs]), axis=0)))
+    nan2 = jnp.full(2, jnp.nan)
+
+    def determined(est, image_size=nan2):
+        return np.asarray(assess(jnp.asarray(est), jnp.eye(4) * 1e-4, 0.5, 100.0, extent, image_size, False, False,
+                                 True, Options()).determined)
+
+    assert not determined([20.0, 20.0, 320.0, 240.0]).any()
+    code = int(implausible(jnp.array([20.0, 20.0, 320.0, 240.0]), extent, nan2, Options()))
+    assert code == COLLAPSED_FOCAL
+    assert "deg of view" in _implausible_text(code, np.array([20.0, 20.0, 320.0, 240.0]), outs)
     for f, ok in ((0.45 * extent, False), (0.55 * extent, True), (700.0, True)):
-        K[0, 0] = K[1, 1] = f
-        determined, _, _, _ = _assess(K, np.eye(4) * 1e-4, 0.5, outs, vx, ls, False)
-        assert determined.all() == ok, f
+        assert determined([f, f, 320.0, 240.0]).all() == ok, f
     # a principal point outside the image, when its size is known
-    K[0, 2] = 700.0
-    assert _assess(K, np.eye(4) * 1e-4, 0.5, outs, vx, ls, False)[0].all()
-    determined, _, _, _ = _assess(K, np.eye(4) * 1e-4, 0.5, outs, vx, ls, False, image_size=(640, 480))
-    assert not determined.any()
+    assert determined([700.0, 700.0, 700.0, 240.0]).all()
+    assert not determined([700.0, 700.0, 700.0, 240.0], jnp.array([640.0, 480.0])).any()
     # a field of view above 120 deg across a 640 px image (f < 184.75 px) is no lens
     # without distortion, whatever the outlines' extent (here 100 px)
     small = [100 * np.stack([np.cos(t), np.sin(t)], 1) for t in [np.linspace(0, 2 * np.pi, 50)]]
     for f, bad in ((180.0, True), (190.0, False)):
-        why = _implausible(np.array([f, f, 320.0, 240.0]), small, (640, 480))
-        assert bool(why) == bad and (not bad or "field of view" in why), (f, why)
-        assert not _implausible(np.array([f, f, 320.0, 240.0]), small)
+        est = np.array([f, f, 320.0, 240.0])
+        code = int(implausible(jnp.asarray(est), 200.0, jnp.array([640.0, 480.0]), Options()))
+        assert (code == WIDE_FOV) == bad, (f, code)
+        assert not bad or "field of view" in _implausible_text(code, est, small, (640, 480))
+        assert int(implausible(jnp.asarray(est), 200.0, nan2, Options())) == PLAUSIBLE

@@ -28,7 +28,7 @@ Top-level keys
     "bundle" (free aspect), "bundle-unit" (aspect ratio 1 imposed); default all),
     gross_error (float, % of f, default 20: a trial whose focal error exceeds it, or
     that fails, counts as a gross failure and is left out of the RMS), workers (int
-    >= 0: worker processes, 0 = one per CPU core; default 0).
+    >= 0: CPU devices the trials are split over, 0 = one per core; default 0).
 [scene]
     type: "two_spheres" (the paper's scene, :func:`sorjax.scenes.two_spheres`),
     "sor" (``profile`` seen from ``poses``) or "random_sor" (a new random scene

@@ -1,4 +1,5 @@
-"""Run an experiment config: trials in worker processes, then the run directory.
+"""Run an experiment config: chunks of trials through the core's compiled program
+(sharded over the devices), then the run directory.
 
 ``run_experiment`` writes ``<out>/<config name>/<timestamp>/``:
 
@@ -15,10 +16,8 @@
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import json
 import math
-import multiprocessing
 import os
 import platform
 import subprocess
@@ -33,7 +32,7 @@ import numpy as np
 
 from ._config import Config
 from ._report import error_figures, records_csv, reference_lines, scene_figure, summarise, table_markdown
-from ._trials import fixed_scene, run_chunk, scene_for, trial_seed
+from ._trials import fixed_scene, run_batch, scene_for, trial_seed
 
 
 @dataclass
@@ -63,12 +62,6 @@ def enable_compilation_cache() -> None:
         jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     except Exception:  # a read-only home: compile every time  # pragma: no cover
         pass
-
-
-def _worker_init():
-    import sorjax  # noqa: F401  (float64 on)
-
-    enable_compilation_cache()
 
 
 def environment() -> dict:
@@ -124,53 +117,45 @@ def compute_bounds(cfg: Config) -> dict:
     return out
 
 
-class _Progress:
-    def __init__(self, total: int, enabled: bool):
-        self.total, self.done, self.enabled, self.t0 = total, 0, enabled and total > 0, time.perf_counter()
+def use_cpu_devices(n: int = 0) -> bool:
+    """Split trials over ``n`` XLA CPU devices (0: one per core), each running its share
+    of a chunk on its own thread: how a run uses every core of one machine.  Takes
+    effect only before JAX starts its backend (call it first thing; the command line
+    does); returns whether it did.  ``XLA_FLAGS`` set by the user wins."""
+    n = (os.cpu_count() or 1) if n == 0 else int(n)
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "xla_force_host_platform_device_count" in flags or n <= 1:
+        return False
+    try:
+        from jax._src import xla_bridge
 
-    def update(self, n: int):
-        self.done += n
-        if not self.enabled:
-            return
-        frac = self.done / self.total
-        bar = "#" * int(30 * frac) + "." * (30 - int(30 * frac))
-        el = time.perf_counter() - self.t0
-        eta = el / frac - el if frac > 0 else math.nan
-        print(f"\r[{bar}] {self.done}/{self.total} trials  {el:5.0f} s  (eta {eta:4.0f} s)", end="", file=sys.stderr,
-              flush=True)
-        if self.done >= self.total:
-            print(file=sys.stderr, flush=True)
+        if xla_bridge.backends_are_initialized():
+            return False
+    except Exception:  # pragma: no cover  (private API moved: leave it to the user)
+        return False
+    os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={n}".strip()
+    return True
 
 
 def _tasks(cfg: Config):
     return [(r, row, t) for r, row in enumerate(cfg.rows()) for t in range(cfg.trials)]
 
 
-def run_trials(cfg: Config, workers: int | None = None, progress: bool = True) -> list[dict]:
+def run_trials(cfg: Config, workers: int | None = None, progress: bool = True, chunk: int = 64) -> list[dict]:
     """Run every trial of ``cfg`` and return the records sorted by (row, trial).
-    ``workers``: processes (default ``cfg.workers``; 0 = one per CPU core; 1 runs in
-    this process)."""
+
+    The trials go through one compiled program of the functional core per shape, in
+    chunks of ``chunk`` trials sharded over every device JAX sees
+    (:class:`sorjax.experiment._trials.TrialProgram`).  ``workers`` is kept for
+    compatibility: the number of CPU devices is set before JAX starts
+    (:func:`use_cpu_devices`, the command line's ``--workers``)."""
+    del workers
+    enable_compilation_cache()
     tasks = _tasks(cfg)
-    workers = cfg.workers if workers is None else workers
-    workers = (os.cpu_count() or 1) if workers == 0 else workers
-    workers = max(1, min(workers, len(tasks)))
-    bar = _Progress(len(tasks), progress)
-    if workers == 1:
-        enable_compilation_cache()
-        records = []
-        for t in tasks:
-            records.extend(run_chunk(cfg, [t]))
-            bar.update(1)
-        return records
-    size = max(1, min(8, len(tasks) // (4 * workers)))
-    chunks = [tasks[i : i + size] for i in range(0, len(tasks), size)]
-    records = []
-    ctx = multiprocessing.get_context("spawn")
-    with cf.ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init) as ex:
-        futs = {ex.submit(run_chunk, cfg, c): len(c) for c in chunks}
-        for fut in cf.as_completed(futs):
-            records.extend(fut.result())
-            bar.update(futs[fut])
+    from tqdm.auto import tqdm
+
+    with tqdm(total=len(tasks), unit="trial", disable=not progress, leave=True, dynamic_ncols=True) as bar:
+        records = run_batch(cfg, tasks, chunk=chunk, on_chunk=bar.update)
     return sorted(records, key=lambda x: (x["row"], x["trial"]))
 
 

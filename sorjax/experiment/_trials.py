@@ -1,10 +1,18 @@
-"""One trial of an experiment: draw the scene and the noise, fit, run every method.
+"""Trials of an experiment: draw each trial's scene and noise on the host, then push
+chunks of trials through one compiled program of the functional core.
 
 Seeds: trial ``t`` of row ``r`` uses ``trial_seed(seed, r, t)`` (a 63-bit integer from
 ``numpy.random.SeedSequence([seed, r, t])``), recorded in the results; the noise is
 drawn from ``default_rng(trial_seed)`` and a random scene from
 ``default_rng([trial_seed, 1])``.  A trial is therefore reproducible on its own,
-whatever the number of workers or the order in which trials run.
+whatever the chunking, the number of devices or the order in which trials run.
+
+The program (:class:`TrialProgram`): per trial, the per-view fits once
+(:func:`sorjax.core.fit_views`), then every method of the config on them
+(:func:`sorjax.core.calibrate_homologies`), ``jax.vmap``-ed over a chunk of trials,
+``jax.jit``-ed once per shape (views, points) and sharded over every device JAX sees
+(:class:`sorjax.core.TrialSharder`).  The records are made on the host from its
+arrays, with the same warnings :func:`sorjax.calibrate` gives.
 """
 
 from __future__ import annotations
@@ -12,14 +20,14 @@ from __future__ import annotations
 import functools
 import math
 import time
-import warnings
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
-from .. import scenes
-from .._calibration import RESULTS, calibrate
-from .._homology import fit_homology
-from .._outline import as_outlines
+from .. import core, scenes
+from .._calibration import code_name, view_notes, verdict_notes
+from .._outline import resample_closed, signed_area
 from ._config import Config, SceneConfig
 
 
@@ -54,17 +62,124 @@ def scene_for(cfg: Config, row: dict, seed: int) -> scenes.Scene:
                                    lying=sc.lying, vary_aspect=sc.vary_aspect, image_size=tuple(sc.image_size))
 
 
-def _code(cal) -> str:
-    for name, item in RESULTS._name_to_item.items():
-        if bool(cal.result == item):
-            return name
-    return "unknown"  # pragma: no cover
+def noisy_outlines(cfg: Config, scene, sigma: float, rng) -> list[np.ndarray]:
+    """The trial's noisy outlines (the config's noise model, drawn from ``rng``)."""
+    nz = cfg.noise
+    if nz.model == "gaussian":
+        return [scenes.gaussian_noise(o, sigma, rng) for o in scene.outlines]
+    return [scenes.paper_noise(o, sigma, rng, smooth_px=nz.smooth_px, preserve_std=nz.preserve_std)
+            for o in scene.outlines]
+
+
+def _resampled(o: np.ndarray, n: int) -> np.ndarray:
+    """A synthetic outline, positively oriented and resampled to ``n`` points (the
+    scenes' outlines are valid by construction: no boundary validation here)."""
+    o = np.asarray(o, dtype=np.float64)
+    return resample_closed(o if signed_area(o) > 0 else o[::-1], n)
+
+
+def draw_trial(cfg: Config, row_index: int, row: dict, trial: int):
+    """One trial's record skeleton and its outline points (V, M, 2) px (None when the
+    scene could not be made; the record then says why)."""
+    seed = trial_seed(cfg.seed, row_index, trial)
+    rec = dict(row=row_index, trial=trial, seed=seed, methods={})
+    try:
+        scene = scene_for(cfg, row, seed)
+    except ValueError as e:
+        rec["error"] = f"scene: {e}"
+        return rec, None
+    K = np.asarray(scene.K)
+    rec["K_true"] = [K[0, 0], K[1, 1], K[0, 2], K[1, 2]]
+    outs = noisy_outlines(cfg, scene, row["sigma"], np.random.default_rng(seed))
+    return rec, np.stack([_resampled(o, cfg.fit.n_points) for o in outs])
 
 
 def _method_args(m: str):
+    """``(core method, aspect)`` of a config's method name."""
     if m == "bundle-unit":
         return "bundle", 1.0
-    return m, None
+    return m, math.nan
+
+
+def options_for(cfg: Config) -> core.Options:
+    return core.Options(n_samples=cfg.fit.n_samples, outline_error_px=float(cfg.fit.outline_error))
+
+
+class TrialProgram:
+    """The compiled program of a config: ``points (B, V, M, 2) -> (homologies,
+    {method: CoreResult})`` with a leading trial axis, sharded over the devices.
+    One compilation per shape; reuse the instance for every chunk of a run."""
+
+    def __init__(self, cfg: Config):
+        self.methods = tuple(cfg.methods)
+        self.options = options_for(cfg)
+        args = tuple(_method_args(m) for m in self.methods)
+
+        options = self.options
+
+        def one(points):
+            homs = core.fit_homologies(points, options)
+            return homs, {m: core.calibrate_homologies(points, homs, meth, a, options=options)
+                          for m, (meth, a) in zip(self.methods, args)}
+
+        self._sharder = core.TrialSharder(one)
+
+    def __call__(self, points: np.ndarray):
+        return self._sharder(points)
+
+
+def records_from(cfg: Config, recs: list[dict], homs, results: dict, seconds: float) -> None:
+    """Fill each trial's record (in place) from the program's outputs for a chunk
+    (numpy, leading trial axis), ``seconds`` the chunk's wall time."""
+    per = seconds / max(len(recs), 1)
+    homs = jax.tree_util.tree_map(np.asarray, homs)
+    results = jax.tree_util.tree_map(np.asarray, results)
+    for b, rec in enumerate(recs):
+        h = jax.tree_util.tree_map(lambda x: x[b], homs)
+        rec["fit_time"] = per / 2
+        rec["l_s"] = h.l_s.tolist()
+        rec["v_x"] = h.v_x.tolist()
+        rec["view_rms"] = [float(x) for x in h.rms]
+        f = rec["K_true"][1]
+        for m in cfg.methods:
+            r = jax.tree_util.tree_map(lambda x: x[b], results[m])
+            K = r.K
+            est = [float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])]
+            err = [(e - k) / f * 100.0 for e, k in zip(est, rec["K_true"])]
+            code = code_name(r.result)
+            ok = code == "successful" and all(np.isfinite(err))
+            gross = (not ok) or max(abs(err[0]), abs(err[1])) > cfg.gross_error
+            method, a = _method_args(m)
+            warns = view_notes(h, r.drop_reason) + verdict_notes(r, method, None if math.isnan(a) else a)
+            rec["methods"][m] = dict(
+                estimate=est, error=err, std=[float(s) for s in np.sqrt(np.diag(r.covariance))], code=code,
+                success=code == "successful", gross=bool(gross), time=per / (2 * len(cfg.methods)), warnings=warns,
+            )
+
+
+def run_batch(cfg: Config, tasks: list[tuple[int, dict, int]], program: TrialProgram | None = None,
+              chunk: int = 64, on_chunk=None) -> list[dict]:
+    """Run ``(row_index, row, trial)`` tasks in chunks of ``chunk`` trials (the last
+    padded, one compiled program per shape); ``on_chunk(n)`` after each chunk."""
+    program = TrialProgram(cfg) if program is None else program
+    drawn = [draw_trial(cfg, r, row, t) for r, row, t in tasks]
+    by_shape: dict[tuple, list[int]] = {}
+    for i, (_, pts) in enumerate(drawn):
+        if pts is not None:
+            by_shape.setdefault(pts.shape, []).append(i)
+    n_dev = len(jax.devices())
+    for idx in by_shape.values():
+        size = -(-min(chunk, len(idx)) // n_dev) * n_dev  # every chunk this size: one compilation
+        for s in range(0, len(idx), size):
+            part = idx[s:s + size]
+            pts = np.stack([drawn[i][1] for i in part] + [drawn[part[-1]][1]] * (size - len(part)))
+            t0 = time.perf_counter()
+            homs, results = program(pts)
+            jax.block_until_ready(results)
+            records_from(cfg, [drawn[i][0] for i in part], homs, results, time.perf_counter() - t0)
+            if on_chunk is not None:
+                on_chunk(len(part))
+    return [rec for rec, _ in drawn]
 
 
 def run_trial(cfg: Config, row_index: int, row: dict, trial: int) -> dict:
@@ -72,59 +187,4 @@ def run_trial(cfg: Config, row_index: int, row: dict, trial: int) -> dict:
 
     Errors are in % of the true ``fv`` (the paper's "percent of f"), signed,
     for ``(fu, fv, u0, v0)``."""
-    seed = trial_seed(cfg.seed, row_index, trial)
-    rec = dict(row=row_index, trial=trial, seed=seed, methods={})
-    try:
-        scene = scene_for(cfg, row, seed)
-    except ValueError as e:
-        rec["error"] = f"scene: {e}"
-        return rec
-    K = np.asarray(scene.K)
-    rec["K_true"] = [K[0, 0], K[1, 1], K[0, 2], K[1, 2]]
-    sigma = row["sigma"]
-    rng = np.random.default_rng(seed)
-    nz = cfg.noise
-    if nz.model == "gaussian":
-        outs = [scenes.gaussian_noise(o, sigma, rng) for o in scene.outlines]
-    else:
-        outs = [scenes.paper_noise(o, sigma, rng, smooth_px=nz.smooth_px, preserve_std=nz.preserve_std)
-                for o in scene.outlines]
-    kw = dict(n_samples=cfg.fit.n_samples, n_points=cfg.fit.n_points)
-    t0 = time.perf_counter()
-    try:
-        outs = as_outlines(outs, cfg.fit.n_points)  # validated and resampled once for every method
-        homs = tuple(fit_homology(o, **kw) for o in outs)
-    except (ValueError, FloatingPointError) as e:
-        rec["error"] = f"homology fit: {e}"
-        return rec
-    rec["fit_time"] = time.perf_counter() - t0
-    rec["l_s"] = [np.asarray(h.l_s).tolist() for h in homs]
-    rec["v_x"] = [np.asarray(h.v_x).tolist() for h in homs]
-    rec["view_rms"] = [float(h.rms) for h in homs]
-    f = K[1, 1]
-    for m in cfg.methods:
-        method, a = _method_args(m)
-        t0 = time.perf_counter()
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            try:
-                cal = calibrate(outs, method=method, aspect_ratio=a, homologies=homs,
-                                outline_error=cfg.fit.outline_error, **kw)
-            except ValueError as e:
-                rec["methods"][m] = dict(code="error", message=str(e), success=False, gross=True,
-                                         time=time.perf_counter() - t0)
-                continue
-        est = [cal.fu, cal.fv, cal.u0, cal.v0]
-        err = [(e - k) / f * 100.0 for e, k in zip(est, rec["K_true"])]
-        ok = cal.success and all(np.isfinite(err))
-        gross = (not ok) or max(abs(err[0]), abs(err[1])) > cfg.gross_error
-        rec["methods"][m] = dict(
-            estimate=est, error=err, std=[float(s) for s in cal.std], code=_code(cal), success=bool(cal.success),
-            gross=bool(gross), time=time.perf_counter() - t0, warnings=[str(w.message) for w in caught],
-        )
-    return rec
-
-
-def run_chunk(cfg: Config, tasks: list[tuple[int, dict, int]]) -> list[dict]:
-    """Run a list of ``(row_index, row, trial)`` tasks (a worker's unit of work)."""
-    return [run_trial(cfg, r, row, t) for r, row, t in tasks]
+    return run_batch(cfg, [(row_index, row, trial)], chunk=1)[0]

@@ -1,0 +1,166 @@
+"""The whole calibration as one pure function of fixed-shape arrays.
+
+    points (V, M, 2) px -> prepare_views -> fit_views (eq. 20, per view)
+      -> view verdicts (conic / not symmetric: masked, never removed)
+      -> Method I / IIa / IIb (normalised coordinates) -> the bundle (2V + 4)
+      -> covariance, perspective evidence, verdicts -> :class:`CoreResult`
+
+:func:`calibrate` runs it all; :func:`calibrate_homologies` starts from per-view
+homologies (pixels) already fitted, so that several methods share one set of fits (as
+an experiment comparing estimators does).  Both are jit / vmap / grad clean: ``method``
+and ``options`` are static, everything else is an array.  ``aspect``: the known
+``fu / fv`` or NaN (free; "I" and "IIb" then take 1, "IIa" is always free).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, Int
+
+from .._bundle import bundle_estimate, bundle_seeds, linearised_covariance
+from .._camera import intrinsics_matrix, transform_points
+from .._linear import linear_estimate
+from ._assess import (USED, assess, axes_intersection, outline_extent, outline_radius, perspective_gate,
+                      view_verdicts)
+from ._options import Options
+from ._prepare import joint_transform, prepare_views
+from ._result import RESULTS, CoreResult
+from ._viewfit import ViewHomologies, fit_views, homologies_in_pixels
+
+METHODS = ("bundle", "I", "IIa", "IIb")
+
+
+def _nan(shape):
+    return jnp.full(shape, jnp.nan)
+
+
+def calibrate(points: Float[Array, "V M 2"], method: str = "bundle", aspect=jnp.nan, *, options: Options = Options(),
+              image_size=None, valid=None) -> CoreResult:
+    """Calibrate from ``V`` outlines of ``M`` evenly spaced pixel points each (e.g.
+    :func:`sorjax.make_outline`'s points, positively oriented).
+
+    Args:
+        points: (V, M, 2) pixels.
+        method: "bundle", "I", "IIa" or "IIb" (static).
+        aspect: known ``fu / fv`` (scalar array) or NaN.
+        options: :class:`Options` (static).
+        image_size: (2,) ``(width, height)`` px, or None / NaN when unknown.
+        valid: (V,) bool, views to consider (False: padding, left out); default all.
+    """
+    homs = fit_homologies(points, options)
+    return calibrate_homologies(points, homs, method, aspect, options=options, image_size=image_size, valid=valid)
+
+
+def fit_homologies(points: Float[Array, "V M 2"], options: Options = Options()) -> ViewHomologies:
+    """Every view's harmonic homology (eq. 20, automatic start, robust), in pixels:
+    :func:`prepare_views`, :func:`fit_views`, :func:`homologies_in_pixels`."""
+    views = prepare_views(points, options.n_samples)
+    return homologies_in_pixels(views, fit_views(views, options), options)
+
+
+def calibrate_homologies(points: Float[Array, "V M 2"], homs: ViewHomologies, method: str = "bundle", aspect=jnp.nan,
+                         *, options: Options = Options(), image_size=None, valid=None) -> CoreResult:
+    """:func:`calibrate` from per-view homologies already fitted (pixels)."""
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}; got {method!r}")
+    points = jnp.asarray(points, jnp.float64)
+    V = points.shape[0]
+    valid = jnp.ones(V, bool) if valid is None else jnp.asarray(valid, bool)
+    image_size = _nan(2) if image_size is None else jnp.asarray(image_size, jnp.float64)
+    aspect = jnp.asarray(aspect, jnp.float64)
+    free = jnp.isnan(aspect) if method == "bundle" else jnp.asarray(method == "IIa")
+    a_lin = jnp.where(jnp.isnan(aspect), 1.0, aspect)  # I / IIb: unit unless known
+
+    radius = outline_radius(points)
+    drop = view_verdicts(homs.rms, homs.rms_untrimmed, radius, homs.is_conic, homs.trimmed, valid, options)
+    used = drop == USED
+    n_used = jnp.sum(used)
+    all_inf = jnp.all(jnp.where(used, homs.at_infinity, True))
+    T = joint_transform(points, used)
+    rms_u = jnp.where(used, homs.rms, jnp.nan)
+    points_n = transform_points(T, points)
+    l_n = homs.l_s @ jnp.linalg.inv(T)  # lines map by T^-T
+    inliers = homs.inliers.astype(jnp.float64)
+
+    if method == "bundle":
+        seeds, seed_ok = bundle_seeds(homs.v_x, homs.l_s, used, T, aspect)
+        out = bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options)
+        K, omega, ok = out.K, out.omega, out.ok
+        cov = out.cov
+        s_px = jnp.sqrt(out.s2)
+        cov_unit = cov / jnp.maximum(s_px, 1e-300) ** 2
+        persp_ok, g_px, z = perspective_gate(out.evidence, out.n, s_px, options)
+        cost, view_rms, steps, vx, ls = out.cost, jnp.where(used, out.view_rms, jnp.nan), out.steps, out.v_x, out.l_s
+        code = RESULTS.where(ok & jnp.all(jnp.isfinite(K)), RESULTS.successful, RESULTS.not_converged)
+        assessed = jnp.all(jnp.isfinite(K)) & (K[0, 0] > 0) & (K[1, 1] > 0)
+    else:
+        a_m = jnp.asarray(jnp.nan) if method == "IIa" else a_lin
+        K, omega, ok = linear_estimate(homs.v_x, homs.l_s, used, T, a_m, method=method)
+        cov = _nan((4, 4))
+        s_px = jnp.sqrt(jnp.sum(jnp.where(used, homs.rms, 0.0) ** 2) / jnp.maximum(n_used, 1))
+        finite = jnp.all(jnp.isfinite(K))
+        cov_unit = linearised_covariance(points_n, used, inliers, l_n, jnp.where(finite, K, jnp.eye(3)), T, a_m,
+                                         options.n_samples)
+        persp_ok, g_px, z = jnp.asarray(True), jnp.asarray(jnp.nan), jnp.asarray(jnp.nan)
+        cost, view_rms, steps, vx, ls = jnp.asarray(jnp.nan), rms_u, jnp.asarray(0, jnp.int32), homs.v_x, homs.l_s
+        code = RESULTS.where(ok, RESULTS.successful,
+                             RESULTS.degenerate if method == "I" else RESULTS.not_positive_definite)
+        assessed = ok & finite & (K[0, 0] > 0) & (K[1, 1] > 0)
+
+    est = jnp.stack([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
+    verdict = assess(est, cov_unit, s_px, jnp.sqrt(jnp.sum(jnp.where(used, radius**2, 0.0)) / jnp.maximum(n_used, 1)),
+                     outline_extent(points, used), image_size, free, all_inf, persp_ok, options)
+    determined = verdict.determined & assessed
+    success = code == RESULTS.successful
+
+    # every v_x at infinity and no focal length from the estimate: the principal point
+    # only, where the imaged axes meet (paper, Section 6)
+    pp_only = all_inf & (~success | ~assessed | ~jnp.all(determined[:2]))
+    pp, cov_pp, spread = axes_intersection(homs.l_s, used)
+    pp_found = jnp.all(jnp.isfinite(pp))
+    K_pp = jnp.where(pp_found, intrinsics_matrix(jnp.nan, jnp.nan, pp[0], pp[1]), _nan((3, 3)))
+    cov_pp4 = _nan((4, 4)).at[0, 0].set(jnp.inf).at[1, 1].set(jnp.inf).at[2:, 2:].set(cov_pp)
+
+    partial = assessed & ~jnp.all(determined)
+    code_partial = RESULTS.where(~jnp.any(determined[:2]) & jnp.all(determined[2:]), RESULTS.only_principal_point,
+                                 RESULTS.degenerate)
+    code = RESULTS.where(partial, code_partial, code)
+    K_out = _mask_undetermined(K, determined)
+    success = code == RESULTS.successful
+    K_out = jnp.where(success | partial, K_out, _nan((3, 3)))
+    omega = jnp.where(success, omega, _nan((3, 3)))
+
+    code = RESULTS.where(pp_only, RESULTS.where(pp_found, RESULTS.only_principal_point, RESULTS.degenerate), code)
+    K_out = jnp.where(pp_only, K_pp, K_out)
+    cov = jnp.where(pp_only, jnp.where(pp_found, cov_pp4, _nan((4, 4))), cov)
+    omega = jnp.where(pp_only, _nan((3, 3)), omega)
+    view_rms = jnp.where(pp_only, rms_u, view_rms)
+    vx = jnp.where(pp_only, homs.v_x, vx)
+    ls = jnp.where(pp_only, homs.l_s, ls)
+
+    few = n_used < 2
+    code = RESULTS.where(few, RESULTS.too_few_views, code)
+    K_out = jnp.where(few, _nan((3, 3)), K_out)
+    cov = jnp.where(few, _nan((4, 4)), cov)
+    omega = jnp.where(few, _nan((3, 3)), omega)
+
+    return CoreResult(
+        K=K_out, K_raw=K, omega=omega, result=code, covariance=cov, std=verdict.std, determined=determined,
+        implausible=verdict.implausible, weak=verdict.weak, aspect_weak=verdict.aspect_weak,
+        cost=jnp.asarray(cost, jnp.float64), s_px=s_px, steps=jnp.asarray(steps, jnp.int32), used=used,
+        drop_reason=drop, view_rms=view_rms, v_x=vx, l_s=ls, all_at_infinity=all_inf,
+        perspective_px=jnp.asarray(g_px, jnp.float64), perspective_z=jnp.asarray(z, jnp.float64),
+        perspective_ok=jnp.asarray(persp_ok), axes_spread_deg=spread,
+    )
+
+
+def _mask_undetermined(K, determined):
+    """``K`` with NaN at the intrinsics not determined."""
+    nan = jnp.nan
+    fu = jnp.where(determined[0], K[0, 0], nan)
+    fv = jnp.where(determined[1], K[1, 1], nan)
+    u0 = jnp.where(determined[2], K[0, 2], nan)
+    v0 = jnp.where(determined[3], K[1, 2], nan)
+    return intrinsics_matrix(fu, fv, u0, v0)
