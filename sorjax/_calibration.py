@@ -512,8 +512,9 @@ def details_for(r, h, points, method: str, a, outline_error: float, image_size=N
 
 
 def _bucket(n: int) -> int:
-    """The padded view count for ``n`` views: 2, 4, 8, ... (one compiled program each)."""
-    return max(2, 1 << (n - 1).bit_length())
+    """The padded view count for ``n`` views: 4, 8, 16, ... (one compiled program each;
+    a masked view costs little, a compilation tens of seconds)."""
+    return max(4, 1 << (n - 1).bit_length())
 
 
 def view_homologies(homologies, n_samples: int) -> ViewHomologies:

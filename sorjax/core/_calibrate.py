@@ -14,6 +14,8 @@ and ``options`` are static, everything else is an array.  ``aspect``: the known
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -53,11 +55,66 @@ def calibrate(points: Float[Array, "V M 2"], method: str = "bundle", aspect=jnp.
     return calibrate_homologies(points, homs, method, aspect, options=options, image_size=image_size, valid=valid)
 
 
-def fit_homologies(points: Float[Array, "V M 2"], options: Options = Options()) -> ViewHomologies:
+def fit_homologies(points: Float[Array, "V M 2"], options: Options = Options(), sequential: bool = False
+                   ) -> ViewHomologies:
     """Every view's harmonic homology (eq. 20, automatic start, robust), in pixels:
-    :func:`prepare_views`, :func:`fit_views`, :func:`homologies_in_pixels`."""
+    :func:`prepare_views`, :func:`fit_views`, :func:`homologies_in_pixels`.
+    ``sequential`` (static): the views one after another (``jax.lax.map``; on a CPU
+    faster and far quicker to compile) instead of ``jax.vmap``."""
     views = prepare_views(points, options.n_samples)
-    return homologies_in_pixels(views, fit_views(views, options), options)
+    return homologies_in_pixels(views, fit_views(views, options, sequential=sequential), options)
+
+
+class _Common(NamedTuple):
+    """What every method of one calibration shares."""
+
+    radius: Array
+    drop: Array
+    used: Array
+    n_used: Array
+    all_inf: Array
+    T: Array
+    rms_u: Array
+    points_n: Array
+    l_n: Array
+    inliers: Array
+
+
+def _common(points, homs: ViewHomologies, valid, options: Options) -> _Common:
+    radius = outline_radius(points)
+    drop = view_verdicts(homs.rms, homs.rms_untrimmed, radius, homs.is_conic, homs.trimmed, valid, options)
+    used = drop == USED
+    T = joint_transform(points, used)
+    return _Common(
+        radius=radius, drop=drop, used=used, n_used=jnp.sum(used),
+        all_inf=jnp.all(jnp.where(used, homs.at_infinity, True)), T=T, rms_u=jnp.where(used, homs.rms, jnp.nan),
+        points_n=transform_points(T, points), l_n=homs.l_s @ jnp.linalg.inv(T),  # lines map by T^-T
+        inliers=homs.inliers.astype(jnp.float64),
+    )
+
+
+def _bundle(c: _Common, homs: ViewHomologies, aspect, options: Options):
+    seeds, seed_ok = bundle_seeds(homs.v_x, homs.l_s, c.used, c.T, aspect)
+    return bundle_estimate(c.points_n, c.used, c.inliers, c.l_n, seeds, seed_ok, aspect, c.T, options)
+
+
+def _linear_aspect(method: str, aspect):
+    """The aspect ratio a linear method imposes: NaN (free) for IIa, else the known
+    one or 1."""
+    return jnp.asarray(jnp.nan) if method == "IIa" else jnp.where(jnp.isnan(aspect), 1.0, aspect)
+
+
+def _linear_cov(c: _Common, K, a_m, options: Options):
+    finite = jnp.all(jnp.isfinite(K))
+    return linearised_covariance(c.points_n, c.used, c.inliers, c.l_n, jnp.where(finite, K, jnp.eye(3)), c.T, a_m,
+                                 options.n_samples)
+
+
+def _check(points, homs, valid, image_size, aspect):
+    points = jnp.asarray(points, jnp.float64)
+    valid = jnp.ones(points.shape[0], bool) if valid is None else jnp.asarray(valid, bool)
+    image_size = _nan(2) if image_size is None else jnp.asarray(image_size, jnp.float64)
+    return points, valid, image_size, jnp.asarray(aspect, jnp.float64)
 
 
 def calibrate_homologies(points: Float[Array, "V M 2"], homs: ViewHomologies, method: str = "bundle", aspect=jnp.nan,
@@ -65,28 +122,56 @@ def calibrate_homologies(points: Float[Array, "V M 2"], homs: ViewHomologies, me
     """:func:`calibrate` from per-view homologies already fitted (pixels)."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}; got {method!r}")
-    points = jnp.asarray(points, jnp.float64)
-    V = points.shape[0]
-    valid = jnp.ones(V, bool) if valid is None else jnp.asarray(valid, bool)
-    image_size = _nan(2) if image_size is None else jnp.asarray(image_size, jnp.float64)
-    aspect = jnp.asarray(aspect, jnp.float64)
-    free = jnp.isnan(aspect) if method == "bundle" else jnp.asarray(method == "IIa")
-    a_lin = jnp.where(jnp.isnan(aspect), 1.0, aspect)  # I / IIb: unit unless known
-
-    radius = outline_radius(points)
-    drop = view_verdicts(homs.rms, homs.rms_untrimmed, radius, homs.is_conic, homs.trimmed, valid, options)
-    used = drop == USED
-    n_used = jnp.sum(used)
-    all_inf = jnp.all(jnp.where(used, homs.at_infinity, True))
-    T = joint_transform(points, used)
-    rms_u = jnp.where(used, homs.rms, jnp.nan)
-    points_n = transform_points(T, points)
-    l_n = homs.l_s @ jnp.linalg.inv(T)  # lines map by T^-T
-    inliers = homs.inliers.astype(jnp.float64)
-
+    points, valid, image_size, aspect = _check(points, homs, valid, image_size, aspect)
+    c = _common(points, homs, valid, options)
     if method == "bundle":
-        seeds, seed_ok = bundle_seeds(homs.v_x, homs.l_s, used, T, aspect)
-        out = bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options)
+        return _finish(points, homs, c, method, aspect, image_size, options, bundle=_bundle(c, homs, aspect, options))
+    a_m = _linear_aspect(method, aspect)
+    K, omega, ok = linear_estimate(homs.v_x, homs.l_s, c.used, c.T, a_m, method=method)
+    return _finish(points, homs, c, method, aspect, image_size, options, linear=(K, omega, ok, _linear_cov(c, K, a_m, options)))
+
+
+def calibrate_methods(points: Float[Array, "V M 2"], homs: ViewHomologies, methods: tuple[str, ...], aspects,
+                      *, options: Options = Options(), image_size=None, valid=None) -> tuple[CoreResult, ...]:
+    """:func:`calibrate_homologies` for several ``methods`` (static tuple) with their
+    ``aspects`` (one each, NaN: free) at once, as an experiment comparing estimators
+    runs them: the bundles of every aspect model share one traced solver
+    (``jax.lax.map`` over the aspects), and so do the linear methods' covariances.
+    The same numbers as separate calls, a fraction of the compilation."""
+    for m in methods:
+        if m not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}; got {m!r}")
+    points, valid, image_size, _ = _check(points, homs, valid, image_size, jnp.nan)
+    aspects = jnp.asarray(aspects, jnp.float64).reshape(len(methods))
+    c = _common(points, homs, valid, options)
+    ib = [i for i, m in enumerate(methods) if m == "bundle"]
+    il = [i for i, m in enumerate(methods) if m != "bundle"]
+    bundles = jax.lax.map(lambda a: _bundle(c, homs, a, options), aspects[jnp.asarray(ib)]) if ib else None
+    lin = {}
+    if il:
+        a_ms = jnp.stack([_linear_aspect(methods[i], aspects[i]) for i in il])
+        ests = [linear_estimate(homs.v_x, homs.l_s, c.used, c.T, a_ms[j], method=methods[i]) for j, i in enumerate(il)]
+        Ks = jnp.stack([e[0] for e in ests])
+        covs = jax.lax.map(lambda ka: _linear_cov(c, ka[0], ka[1], options), (Ks, a_ms))
+        lin = {i: ests[j] + (covs[j],) for j, i in enumerate(il)}
+    out = []
+    for i, m in enumerate(methods):
+        if m == "bundle":
+            b = jax.tree_util.tree_map(lambda x: x[ib.index(i)], bundles)
+            out.append(_finish(points, homs, c, m, aspects[i], image_size, options, bundle=b))
+        else:
+            out.append(_finish(points, homs, c, m, aspects[i], image_size, options, linear=lin[i]))
+    return tuple(out)
+
+
+def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image_size, options: Options, bundle=None,
+            linear=None) -> CoreResult:
+    """The verdicts and the result of one method's estimate (``bundle``: a
+    :class:`sorjax._bundle.BundleOut`; ``linear``: ``(K, omega, ok, cov_unit)``)."""
+    free = jnp.isnan(aspect) if method == "bundle" else jnp.asarray(method == "IIa")
+    used, n_used, all_inf, radius, rms_u = c.used, c.n_used, c.all_inf, c.radius, c.rms_u
+    if bundle is not None:
+        out = bundle
         K, omega, ok = out.K, out.omega, out.ok
         cov = out.cov
         s_px = jnp.sqrt(out.s2)
@@ -96,13 +181,10 @@ def calibrate_homologies(points: Float[Array, "V M 2"], homs: ViewHomologies, me
         code = RESULTS.where(ok & jnp.all(jnp.isfinite(K)), RESULTS.successful, RESULTS.not_converged)
         assessed = jnp.all(jnp.isfinite(K)) & (K[0, 0] > 0) & (K[1, 1] > 0)
     else:
-        a_m = jnp.asarray(jnp.nan) if method == "IIa" else a_lin
-        K, omega, ok = linear_estimate(homs.v_x, homs.l_s, used, T, a_m, method=method)
+        K, omega, ok, cov_unit = linear
         cov = _nan((4, 4))
         s_px = jnp.sqrt(jnp.sum(jnp.where(used, homs.rms, 0.0) ** 2) / jnp.maximum(n_used, 1))
         finite = jnp.all(jnp.isfinite(K))
-        cov_unit = linearised_covariance(points_n, used, inliers, l_n, jnp.where(finite, K, jnp.eye(3)), T, a_m,
-                                         options.n_samples)
         persp_ok, g_px, z = jnp.asarray(True), jnp.asarray(jnp.nan), jnp.asarray(jnp.nan)
         cost, view_rms, steps, vx, ls = jnp.asarray(jnp.nan), rms_u, jnp.asarray(0, jnp.int32), homs.v_x, homs.l_s
         code = RESULTS.where(ok, RESULTS.successful,
@@ -150,7 +232,7 @@ def calibrate_homologies(points: Float[Array, "V M 2"], homs: ViewHomologies, me
         K=K_out, K_raw=K, omega=omega, result=code, covariance=cov, std=verdict.std, determined=determined,
         implausible=verdict.implausible, weak=verdict.weak, aspect_weak=verdict.aspect_weak,
         cost=jnp.asarray(cost, jnp.float64), s_px=s_px, steps=jnp.asarray(steps, jnp.int32), used=used,
-        drop_reason=drop, view_rms=view_rms, v_x=vx, l_s=ls, all_at_infinity=all_inf,
+        drop_reason=c.drop, view_rms=view_rms, v_x=vx, l_s=ls, all_at_infinity=all_inf,
         perspective_px=jnp.asarray(g_px, jnp.float64), perspective_z=jnp.asarray(z, jnp.float64),
         perspective_ok=jnp.asarray(persp_ok), axes_spread_deg=spread,
     )

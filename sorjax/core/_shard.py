@@ -57,12 +57,22 @@ class TrialSharder:
     new one (or calling :func:`sharded_vmap`) traces and compiles again.
     """
 
-    def __init__(self, fn: Callable[..., Any], devices: Sequence[jax.Device] | None = None):
-        self.fn = fn
+    def __init__(self, fn: Callable[..., Any], devices: Sequence[jax.Device] | None = None, batch: str | None = None):
         self.devices = tuple(jax.devices() if devices is None else devices)
+        if batch is None:
+            batch = "map" if jax.default_backend() == "cpu" and len(self.devices) == 1 else "vmap"
+        if batch not in ("vmap", "map"):
+            raise ValueError(f"batch must be 'vmap' or 'map'; got {batch!r}")
+        if batch == "map" and len(self.devices) > 1:
+            raise ValueError("batch='map' runs on one device (optimistix's solvers do not run inside "
+                             "jax.shard_map); use batch='vmap' to shard trials over several devices")
+        self.fn, self.batch = fn, batch
         self.mesh = Mesh(np.asarray(self.devices, dtype=object), (TRIALS,))
         self.sharding = NamedSharding(self.mesh, PartitionSpec(TRIALS))
-        self.batched = jax.jit(jax.vmap(fn), out_shardings=self.sharding)
+        if batch == "vmap":
+            self.batched = jax.jit(jax.vmap(fn), out_shardings=self.sharding)
+        else:  # the trials one after another, in one compiled loop
+            self.batched = jax.jit(lambda *xs: jax.lax.map(lambda args: fn(*args), xs))
 
     @property
     def n_devices(self) -> int:

@@ -113,14 +113,15 @@ class TrialProgram:
     def __init__(self, cfg: Config):
         self.methods = tuple(cfg.methods)
         self.options = options_for(cfg)
-        args = tuple(_method_args(m) for m in self.methods)
-
         options = self.options
+        names = tuple(_method_args(m)[0] for m in self.methods)
+        aspects = np.array([_method_args(m)[1] for m in self.methods])
+        sequential = jax.default_backend() == "cpu" and len(jax.devices()) == 1  # core.TrialSharder's ``batch``
 
         def one(points):
-            homs = core.fit_homologies(points, options)
-            return homs, {m: core.calibrate_homologies(points, homs, meth, a, options=options)
-                          for m, (meth, a) in zip(self.methods, args)}
+            homs = core.fit_homologies(points, options, sequential)
+            res = core.calibrate_methods(points, homs, names, aspects, options=options)
+            return homs, dict(zip(self.methods, res))
 
         self._sharder = core.TrialSharder(one)
 
