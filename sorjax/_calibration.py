@@ -378,6 +378,36 @@ def _code_item(result):
     return RESULTS._name_to_item[code_name(result)]
 
 
+def _drop_texts(h, i: int, d: int, name: str):
+    """``(reason, warning)`` for view ``i`` dropped by the core for reason ``d``
+    (:data:`sorjax.core._assess.DROP_REASONS`), or None when it is used."""
+    o = Options()
+    rms = max(float(h.rms[i]), float(h.rms_untrimmed[i]))
+    tr = float(h.trimmed[i])
+    if d == CONIC:
+        return "conic outline", (
+            f"{name}: the outline is a conic to within {float(h.conic_rms[i]):.2g} px (its symmetry "
+            f"residual is {rms:.2g} px), like a sphere or a bowl seen from above showing "
+            "only its rim: infinitely many homologies fit it, so it carries no calibration "
+            "information (paper, Section 6). Dropped; use views where the body's profile shows.")
+    if d == TRIMMED:
+        return f"not symmetric ({100 * tr:.0f} % of the outline trimmed)", (
+            f"{name}: the outline is not symmetric: {100 * tr:.0f} % of its samples have no "
+            f"mirror image under the best harmonic homology (more than {100 * o.max_trimmed:.0f} % "
+            "cannot be a handle or a shadow on a surface of revolution). Dropped; check the "
+            "segmentation of this view.")
+    if d == ASYMMETRIC:
+        return f"not symmetric (rms {rms:.3g} px)", (
+            f"{name}: the outline is not symmetric: its best harmonic homology leaves an RMS "
+            f"symmetry residual of {rms:.3g} px (a surface of revolution with up to 2 px of noise "
+            f"stays below about {o.asymmetry_px:g} px), so it is not the outline of a surface of "
+            "revolution (or it is broken, occluded or merged with something else). Dropped; "
+            "check the segmentation of this view.")
+    if d == MASKED:
+        return "left out by the caller", None
+    return None
+
+
 def view_notes(h, drop_reason, names=None) -> list[str]:
     """The per-view warnings of a calibration, from the per-view homologies ``h``
     (:class:`sorjax.core.ViewHomologies`, numpy) and the core's drop reasons: fits
@@ -385,46 +415,21 @@ def view_notes(h, drop_reason, names=None) -> list[str]:
     caveat (trimmed, high residual)."""
     names = names or [f"view {i}" for i in range(len(drop_reason))]
     o = Options()
-    notes = []
+    notes = [f"{name}: the homology fit did not converge (rms {float(h.rms[i]):.3g} px)."
+             for i, name in enumerate(names) if not bool(h.converged[i])]
     for i, name in enumerate(names):
-        if not bool(h.converged[i]):
-            notes.append(f"{name}: the homology fit did not converge (rms {float(h.rms[i]):.3g} px).")
-    for i, name in enumerate(names):
-        rms = max(float(h.rms[i]), float(h.rms_untrimmed[i]))
-        d, tr = int(drop_reason[i]), float(h.trimmed[i])
-        if d == CONIC:
-            notes.append(
-                f"{name}: the outline is a conic to within {float(h.conic_rms[i]):.2g} px (its symmetry "
-                f"residual is {rms:.2g} px), like a sphere or a bowl seen from above showing "
-                "only its rim: infinitely many homologies fit it, so it carries no calibration "
-                "information (paper, Section 6). Dropped; use views where the body's profile shows."
-            )
-        elif d == TRIMMED:
-            notes.append(
-                f"{name}: the outline is not symmetric: {100 * tr:.0f} % of its samples have no "
-                f"mirror image under the best harmonic homology (more than {100 * o.max_trimmed:.0f} % "
-                "cannot be a handle or a shadow on a surface of revolution). Dropped; check the "
-                "segmentation of this view."
-            )
-        elif d == ASYMMETRIC:
-            notes.append(
-                f"{name}: the outline is not symmetric: its best harmonic homology leaves an RMS "
-                f"symmetry residual of {rms:.3g} px (a surface of revolution with up to 2 px of noise "
-                f"stays below about {o.asymmetry_px:g} px), so it is not the outline of a surface of "
-                "revolution (or it is broken, occluded or merged with something else). Dropped; "
-                "check the segmentation of this view."
-            )
-        elif d == USED:
-            if tr >= o.note_trimmed:
-                notes.append(
-                    f"{name}: {100 * tr:.0f} % of the outline's samples have no mirror image (a "
-                    "handle, a shadow, an occlusion?) and were left out of the fit."
-                )
-            if rms > o.warn_asymmetry_px:
-                notes.append(
-                    f"{name}: high symmetry residual ({rms:.3g} px): a noisy outline, or not quite a "
-                    "surface of revolution; kept. Check its segmentation."
-                )
+        dropped = _drop_texts(h, i, int(drop_reason[i]), name)
+        if dropped is not None:
+            if dropped[1]:
+                notes.append(dropped[1])
+            continue
+        rms, tr = max(float(h.rms[i]), float(h.rms_untrimmed[i])), float(h.trimmed[i])
+        if tr >= o.note_trimmed:
+            notes.append(f"{name}: {100 * tr:.0f} % of the outline's samples have no mirror image (a "
+                         "handle, a shadow, an occlusion?) and were left out of the fit.")
+        if rms > o.warn_asymmetry_px:
+            notes.append(f"{name}: high symmetry residual ({rms:.3g} px): a noisy outline, or not quite a "
+                         "surface of revolution; kept. Check its segmentation.")
     return notes
 
 
@@ -432,15 +437,9 @@ def dropped_views(h, drop_reason) -> tuple[tuple[int, str], ...]:
     """``(view index, reason)`` of each view the core left out."""
     out = []
     for i, d in enumerate(np.asarray(drop_reason)):
-        rms = max(float(h.rms[i]), float(h.rms_untrimmed[i]))
-        if d == CONIC:
-            out.append((i, "conic outline"))
-        elif d == TRIMMED:
-            out.append((i, f"not symmetric ({100 * float(h.trimmed[i]):.0f} % of the outline trimmed)"))
-        elif d == ASYMMETRIC:
-            out.append((i, f"not symmetric (rms {rms:.3g} px)"))
-        elif d == MASKED:
-            out.append((i, "left out by the caller"))
+        dropped = _drop_texts(h, i, int(d), f"view {i}")
+        if dropped is not None:
+            out.append((i, dropped[0]))
     return tuple(out)
 
 
