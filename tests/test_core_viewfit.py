@@ -3,6 +3,8 @@ jit/vmap consistency, robust trimming, conic and at-infinity flags.
 
 All views go through one ``jax.jit(vmap)`` compilation (one batch of equal shapes)."""
 
+import re
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -105,6 +107,7 @@ def test_noisy_views_are_local_minima_near_truth(batch):
         assert dl < 0.5, (name, dl)
 
 
+@pytest.mark.slow
 def test_jit_vmap_equals_single_calls(batch):
     rows, views, fits, _ = batch
     one = jax.jit(lambda f, s, w, p, sc: fit_view(f, s, w, p, OPTIONS, None, sc))
@@ -120,7 +123,7 @@ def test_jit_vmap_equals_single_calls(batch):
 
 
 def test_handle_is_trimmed(batch):
-    rows, _, fits, homs = batch
+    rows, views, fits, homs = batch
     i, K, view = rows["handle"]
     h, f = _get(homs, i), _get(fits, i)
     dl, _ = _errors(K, h, view)
@@ -128,6 +131,25 @@ def test_handle_is_trimmed(batch):
     assert 0.05 < float(h.trimmed) < 0.4
     assert float(f.n) < float(f.n_untrimmed) and float(f.cost) < float(f.cost_untrimmed)
     assert not bool(h.is_conic)
+    # the last refit (started at the previous round's optimum) is a stationary point
+    # of eq. 20 over the kept samples
+    p, v0, E = _pack(f.v, f.l)
+    args = (_get(views.fields, i), views.samples[i], views.weights[i] * f.inliers, v0, E)
+    r, J = _residuals(p, args), jax.jacfwd(_residuals)(p, args)
+    np.testing.assert_allclose(float(jnp.sum(r**2)), float(f.cost), rtol=1e-12)
+    assert float(jnp.linalg.norm(J.T @ r)) < 1e-7 * float(jnp.linalg.norm(J)) * float(jnp.linalg.norm(r))
+
+
+def test_each_solver_is_traced_once(batch):
+    """The screen, Gauss-Newton and Levenberg-Marquardt: three solves in the program
+    (the robust refits reuse the polish's while loop), whatever the trimming rounds."""
+    rows, views, _, _ = batch
+    i = rows["handle"][0]
+    args = (_get(views.fields, i), views.samples[i], views.weights[i], views.points[i], views.scale[i])
+    for options in (OPTIONS, Options(trim_rounds=0)):
+        fit = jax.jit(lambda f, s, w, p, sc: fit_view(f, s, w, p, options, None, sc))  # noqa: B023
+        text = fit.lower(*args).as_text()
+        assert len(re.findall(r"func\.func private @least_squares", text)) == 3
 
 
 def test_sphere_outline_is_conic(batch):
@@ -155,6 +177,7 @@ def test_init_replaces_the_automatic_starts(batch):
     assert float(jnp.abs(g.l @ f.l)) > 1 - 1e-10
 
 
+@pytest.mark.slow
 def test_sequential_map_equals_vmap(batch):
     rows, views, fits, _ = batch
     idx = np.array([rows[n][0] for n in ("sor 1.1", "noisy sphere 1", "handle")])

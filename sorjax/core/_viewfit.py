@@ -27,8 +27,11 @@ while loop that stops after the last valid one, so that the 36 conic slots cost
 nothing unless the outline is nearly conic), the lowest cost (the first of equal ones)
 is polished (Gauss-Newton, then Levenberg-Marquardt where that fails:
 :func:`sorjax._solvers.polish_traced`), then up to ``options.trim_rounds`` robust
-rounds trim outlier samples (a handle, a shadow) and refit, in a while loop that stops
-at the first round with nothing to trim (never below half of the samples).
+rounds trim outlier samples (a handle, a shadow) and refit from the previous optimum,
+until the first round with nothing to trim (never below half of the samples).  The
+polish and the refits are one while loop (its round 0 the polish of the screened
+start), so that each solver is traced once: the screen, Gauss-Newton and
+Levenberg-Marquardt, three solves in the program.
 
 Under ``vmap`` every while loop runs until its slowest lane is done (the others
 masked): a batch costs what its most demanding view needs, per loop.
@@ -90,7 +93,7 @@ class ViewFit(eqx.Module):
         cost_untrimmed, n_untrimmed: the same for the fit to all samples, before any
             trimming.
         converged: the final solve reported success.
-        steps: solver steps taken (screen, polish and refits).
+        steps: solver steps taken (screen, polish and refits; a refit is not screened).
         inliers: (N,) samples kept by the robust rounds (weight-0 samples count in).
         infinity_z: ``|v_3| / std(v_3)`` (first order, affine invariant).
         conic_rms: RMS Sampson distance of the outline from its best conic
@@ -176,14 +179,16 @@ def _residuals(p, args):
 def refine(field: DistanceField, samples, weights, p0, v0, E, max_steps: int, method: str):
     """Minimise eq. 20 from ``(p0, v0, E)`` with ``method`` ("lm", "gn", "screen").
     Returns ``(v, l, cost, converged, steps, p, r, stale)``: ``r`` the whole-outline
-    residuals, ``stale`` whether they differ from the solver's hinted ones."""
+    residuals, ``stale`` whether they differ from the solver's hinted ones (always
+    ``False`` for "screen", whose runs are not repeated)."""
     args = (field, samples, weights, v0, E)
     hints = symmetry_feet(*_unpack(p0, v0, E), samples, field)
     sol = optx.least_squares(_residuals, _SOLVERS[method], p0, args=args + (hints,), max_steps=max_steps,
                              throw=False)
     v, l = _unpack(sol.value, v0, E)
     r = _residuals(sol.value, args)
-    stale = is_stale(r, _residuals(sol.value, args + (hints,)))
+    # the screen's runs are not re-run: its staleness is not traced
+    stale = jnp.asarray(False) if method == "screen" else is_stale(r, _residuals(sol.value, args + (hints,)))
     ok = sol.result == optx.RESULTS.successful
     return v, l, jnp.sum(r**2), ok, jnp.asarray(sol.stats["num_steps"], jnp.int32), sol.value, r[:-1], stale
 
@@ -244,25 +249,25 @@ def _screen(field, samples, weights, vs, ls, valid, options: Options):
     return costs, ps, steps0, v0, E
 
 
-def _fit_from_starts(field, samples, weights, vs, ls, valid, options: Options) -> _Fit:
-    """Screen the starts ``(vs, ls)`` (S, 3) where ``valid`` (:func:`_screen`), polish
-    the lowest-cost one (the first of equal costs)."""
-    costs, ps, steps0, v0, E = _screen(field, samples, weights, vs, ls, valid, options)
-    k = jnp.argmin(costs)
-    v0k, Ek = v0[k], E[k]
+def _polish(field, samples, weights, p0, v0, E, cost0, options: Options) -> _Fit:
+    """Polish one start ``p0`` (chart ``v0, E``; its cost ``cost0``) with ``weights``:
+    Gauss-Newton, then Levenberg-Marquardt where that fails
+    (:func:`sorjax._solvers.polish_traced`), each solve re-run while its hints are stale
+    (:func:`sorjax._solvers.until_fresh_traced`).  The cost is ``nan`` where ``cost0``
+    is not finite (no start had a finite cost)."""
 
     def run(p, method):
         def once(p):
-            out = refine(field, samples, weights, p, v0k, Ek, options.max_steps, method)
+            out = refine(field, samples, weights, p, v0, E, options.max_steps, method)
             return out, out[5], out[4], out[7]
 
         out, _, steps = until_fresh_traced(once, p)
         return Solved(out[5], out[3], out[2], steps, out)
 
-    final, steps = polish_traced(run, ps[k], costs[k])
+    final, steps = polish_traced(run, p0, cost0)
     out = final.out
-    cost = jnp.where(jnp.isfinite(costs[k]), out[2], jnp.nan)  # no start had a finite cost
-    return _Fit(out[0], out[1], cost, out[3], steps0[k] + steps, out[6])
+    cost = jnp.where(jnp.isfinite(cost0), out[2], jnp.nan)
+    return _Fit(out[0], out[1], cost, out[3], steps, out[6])
 
 
 # ------------------------------------------------------------- starting points
@@ -456,37 +461,46 @@ def fit_view(field: DistanceField, samples: Float[Array, "N 2"], weights: Float[
     else:
         vs, ls = (jnp.asarray(a, jnp.float64)[None] for a in init)
         valid = jnp.ones(1, bool)
-    fit = _fit_from_starts(field, samples, weights, vs, ls, valid, options)
+    costs, ps, steps0, v0, E = _screen(field, samples, weights, vs, ls, valid, options)
+    k = jnp.argmin(costs)  # the first of equal costs
     n_all = jnp.sum(weights)
-    cost_all = fit.cost
-
     active = weights > 0
-    keep = jnp.ones(samples.shape[0], bool)
+    n = samples.shape[0]
 
-    def trims(fit, keep):
-        """The samples to keep after this round's trimming, and whether to refit."""
-        out = _outliers(fit.r * scale, active, keep, options)
-        go = jnp.any(out) & (jnp.sum(keep & ~out & active) >= jnp.sum(active) // 2)
-        return keep & ~out, go
-
+    # One while loop polishes the screened start with every sample (round 0), then
+    # refits from the previous round's optimum with the outliers trimmed, while there
+    # is something to trim (never below half of the samples), ``options.trim_rounds``
+    # refits at most: the polish (Gauss-Newton, Levenberg-Marquardt) is traced once.
+    # A while loop, not a select: under vmap a batch with nothing to trim refits nothing.
     def cond(c):
-        return c[4] & (c[0] < options.trim_rounds)
+        i, go = c[0], c[5]
+        return (i == 0) | (go & (i <= options.trim_rounds))
 
     def body(c):
-        i, fit, keep, kept, _ = c
-        new = _fit_from_starts(field, samples, weights * kept, fit.v[None], fit.l[None], jnp.ones(1, bool), options)
-        new = eqx.tree_at(lambda f: f.steps, new, fit.steps + new.steps)
-        return (i + 1, new, kept) + trims(new, kept)
+        i, start, _, _, kept, _, steps, cost_all = c
+        fit = _polish(field, samples, weights * kept, *start, options)
+        out = _outliers(fit.r * scale, active, kept, options)
+        trimmed = kept & ~out
+        go = jnp.any(out) & (jnp.sum(trimmed & active) >= jnp.sum(active) // 2)
+        # the next round's start: this optimum, its chart centred on it, its cost with
+        # the trimmed weights (from this fit's residuals: kept and trimmed are 0 / 1)
+        p, v, e = _pack(fit.v, fit.l)
+        barrier = _BARRIER_GAIN * jax.nn.relu(_BARRIER_AT - jnp.abs(fit.v @ fit.l) / jnp.linalg.norm(fit.l))
+        cost = jnp.sum((fit.r * trimmed) ** 2) + barrier**2
+        cost_all = jnp.where(i == 0, fit.cost, cost_all)
+        return i + 1, (p, v, e, cost), fit, kept, trimmed, go, steps + fit.steps, cost_all
 
-    # a while loop, not a select: under vmap a batch with nothing to trim refits nothing
-    if options.trim_rounds:
-        c = (jnp.asarray(0, jnp.int32), fit, keep) + trims(fit, keep)
-        _, fit, keep, _, _ = jax.lax.while_loop(cond, body, c)
+    zero = jnp.zeros((), jnp.float64)
+    fit0 = _Fit(jnp.zeros(3), jnp.zeros(3), zero, jnp.asarray(False), jnp.asarray(0, jnp.int32), jnp.zeros(n))
+    keep = jnp.ones(n, bool)
+    init_c = (jnp.asarray(0, jnp.int32), (ps[k], v0[k], E[k], costs[k]), fit0, keep, keep, jnp.asarray(True),
+              steps0[k], zero)
+    _, _, fit, keep, _, _, steps, cost_all = jax.lax.while_loop(cond, body, init_c)
     w = weights * keep
     z = _infinity_z(field, samples, w, fit.v, fit.l, fit.cost)
     l = fit.l / jnp.linalg.norm(fit.l[:2])
     return ViewFit(fit.v / jnp.linalg.norm(fit.v), l, fit.cost, jnp.sum(w), cost_all, n_all, fit.ok,
-                   fit.steps, keep, z, conic_rms)
+                   steps, keep, z, conic_rms)
 
 
 def fit_views(views: Views, options: Options = Options(), init=None, sequential: bool = False) -> ViewFit:
