@@ -11,7 +11,6 @@ compiled program.
 
 from __future__ import annotations
 
-import functools
 import math
 import warnings
 
@@ -24,7 +23,7 @@ from jaxtyping import Array, Float, Int
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
 from ._outline import DEFAULT_POINTS, as_outlines
 from .core._assess import ASYMMETRIC, COLLAPSED_FOCAL, CONIC, MASKED, PP_OUTSIDE, TRIMMED, USED, WIDE_FOV
-from .core._calibrate import calibrate_homologies
+from .core._calibrate import calibrate_methods
 from .core._options import Options
 from .core._result import RESULTS
 from .core._viewfit import ViewHomologies
@@ -538,20 +537,27 @@ def view_homologies(homologies, n_samples: int) -> ViewHomologies:
     return ViewHomologies(**{k: np.stack([r[k] for r in rows]) for k in rows[0]})
 
 
-@functools.partial(jax.jit, static_argnames=("method",))
-def _core(points, homs, method, aspect, options, image_size, valid):
-    return calibrate_homologies(points, homs, method, aspect, options=options, image_size=image_size, valid=valid)
+_SHELL_METHODS = ("I", "IIa", "IIb", "bundle")
+
+
+@jax.jit
+def _core(points, homs, aspect, options, image_size, valid):
+    """Every method at once (:func:`sorjax.core.calibrate_methods`): one compiled
+    program per padded view count serves all four, at the run-time cost of the three
+    cheap linear methods (a few ms) beside the one asked for."""
+    return calibrate_methods(points, homs, _SHELL_METHODS, jnp.stack([aspect] * len(_SHELL_METHODS)), options=options,
+                             image_size=image_size, valid=valid)
 
 
 def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, options: Options, image_size):
     """The core on ``V`` views padded to :func:`_bucket` (copies of view 0, masked);
-    returns the result as numpy, cut back to ``V`` views."""
+    returns the result of ``method`` as numpy, cut back to ``V`` views."""
     V = points.shape[0]
     B = _bucket(V)
     pad = lambda x: np.concatenate([x, np.repeat(x[:1], B - V, axis=0)]) if B > V else x  # noqa: E731
     valid = np.arange(B) < V
-    r = _core(pad(points), jax.tree_util.tree_map(pad, homs), method, np.float64(aspect), options,
-              np.asarray(image_size, np.float64), valid)
+    r = _core(pad(points), jax.tree_util.tree_map(pad, homs), np.float64(aspect), options,
+              np.asarray(image_size, np.float64), valid)[_SHELL_METHODS.index(method)]
     r = jax.tree_util.tree_map(np.asarray, r)
     per_view = ("used", "drop_reason", "view_rms", "v_x", "l_s")
     return eqx.tree_at(lambda x: [getattr(x, k) for k in per_view], r, [getattr(r, k)[:V] for k in per_view])

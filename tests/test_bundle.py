@@ -60,6 +60,7 @@ def test_axis_chart_gives_the_pole_polar_pairs(scene):
     np.testing.assert_allclose(np.cross(m, l2), 0.0, atol=1e-12 * np.abs(m).max())
 
 
+@pytest.mark.slow
 def test_solve_vmapped_over_trials_matches_loop(scene):
     trials = []
     for t in range(2):
@@ -142,6 +143,7 @@ def test_make_problem_is_pure_and_masks_views():
     assert np.all(np.isfinite(np.asarray(m.samples)))
 
 
+@pytest.mark.slow
 def test_implicit_gradient_of_intrinsics_matches_finite_differences(scene):
     outs = [scenes.paper_noise(o, 0.5, 7 + i) for i, o in enumerate(scene.outlines)]
     cal = sorjax.calibrate(outs, n_points=256)
@@ -166,6 +168,7 @@ def test_predicted_error_properties(scene):
     np.testing.assert_allclose(s1[0], s1[1], rtol=1e-12)  # unit aspect: fu = fv
 
 
+@pytest.mark.slow
 def test_losses_import_and_differentiate_in_fresh_session():
     code = textwrap.dedent(
         """

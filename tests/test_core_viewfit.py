@@ -1,7 +1,8 @@
 """The per-view fit as a pure function (sorjax.core._viewfit): truth, optimality,
 jit/vmap consistency, robust trimming, conic and at-infinity flags.
 
-All views go through one ``jax.jit(vmap)`` compilation (one batch of equal shapes)."""
+All views go through one compiled ``jax.lax.map`` (one batch of equal shapes); the
+``jax.vmap`` of the same fit is compared with it in the slow tests."""
 
 import re
 
@@ -29,7 +30,7 @@ def _points(outlines):
 @jax.jit
 def _fit_all(points):
     views = prepare_views(points, OPTIONS.n_samples)
-    fits = fit_views(views, OPTIONS)
+    fits = fit_views(views, OPTIONS, sequential=True)  # lax.map: the vmap is compared in the slow tests
     return views, fits, homologies_in_pixels(views, fits, OPTIONS)
 
 
