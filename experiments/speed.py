@@ -657,6 +657,8 @@ def main(argv=None):
     if quick is not None:
         rows.append(("table1-quick subprocess, fresh cache", quick.get("error", f"{quick.get('wall_s', 0):.1f} s"),
                      f"<= {TARGET_QUICK_S:g} s", None if "error" in quick else quick["wall_s"] <= TARGET_QUICK_S))
+    if multi is not None and "error" in multi:
+        rows.append((f"table over {devices} devices", multi["error"], "beats 1 device?", False))
     if multi is not None and "error" not in multi:
         rows.append((f"table over {multi['devices']} devices: wall / warm", f"{multi['wall_s']:.1f} s / "
                      f"{_ms(multi['warm_trial_s'])}", "beats 1 device?",
