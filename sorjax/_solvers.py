@@ -124,17 +124,16 @@ def until_fresh_traced(solve_once: Callable[[Any], tuple], y0) -> tuple[Any, Any
 
 
 def polish_traced(run: Callable[[Any, str], Solved], y0, cost0) -> tuple[Solved, Any]:
-    """Traced :func:`polish`: Gauss-Newton from ``y0`` (cost ``cost0``), then
-    Levenberg-Marquardt from the better of its end and ``y0``, whose result is kept
-    only where Gauss-Newton did not converge or ended above ``cost0``.  ``run(y,
-    method)`` returns a :class:`Solved` of arrays.  Returns ``(final, steps)``, the
-    steps counting both solves where the second was needed."""
-
+    """Traced :func:`polish`: Gauss-Newton from ``y0`` (cost ``cost0``), then, only
+    where Gauss-Newton did not converge or ended above ``cost0``, Levenberg-Marquardt
+    from the better of its end and ``y0`` (``lax.cond``: skipped when not needed, except
+    under ``vmap``, where both run and the result is selected).  ``run(y, method)``
+    returns a :class:`Solved` of arrays.  Returns ``(final, steps)``, the steps
+    counting both solves where the second was needed."""
     gn = run(y0, "gn")
     improved = jnp.isfinite(gn.cost) & (gn.cost <= cost0 * (1 + 1e-12))
     use_gn = gn.ok & improved
     start = jax.tree_util.tree_map(lambda a, b: jnp.where(improved, a, b), gn.y, y0)
-    lm = run(start, "lm")
-    final = jax.tree_util.tree_map(lambda a, b: jnp.where(use_gn, a, b), gn, lm)
-    steps = gn.steps + jnp.where(use_gn, 0, lm.steps)
+    final = jax.lax.cond(use_gn, lambda: gn, lambda: run(start, "lm"))
+    steps = gn.steps + jnp.where(use_gn, 0, final.steps)
     return final, steps

@@ -138,8 +138,9 @@ def test_end_to_end_run_directory_and_determinism(tmp_path):
     # determinism: one trial re-run on its own gives the same numbers; another seed does not
     again = run_trial(cfg, 1, cfg.rows()[1], 1)
     assert again["seed"] == recs[3]["seed"]
-    assert again["methods"]["IIb"]["estimate"] == recs[3]["methods"]["IIb"]["estimate"]
-    assert again["methods"]["bundle-unit"]["estimate"] == recs[3]["methods"]["bundle-unit"]["estimate"]
+    # the same trial alone (another chunk size, so another compiled loop): equal to round-off
+    for m in ("IIb", "bundle-unit"):
+        np.testing.assert_allclose(again["methods"][m]["estimate"], recs[3]["methods"][m]["estimate"], rtol=1e-10)
     other = run_trial(cfg.replace(seed=4), 1, cfg.rows()[1], 1)
     assert other["methods"]["IIb"]["estimate"] != recs[3]["methods"]["IIb"]["estimate"]
 

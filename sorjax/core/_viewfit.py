@@ -202,7 +202,7 @@ class _Fit(eqx.Module):
     r: Array
 
 
-SCREEN_BLOCK = 12  # starts screened per block (one vmapped solve); blocks run while needed
+SCREEN_BLOCK = 4  # starts screened per block (one vmapped solve); blocks run while needed (a view has ~4 valid)
 
 
 def _screen(field, samples, weights, vs, ls, valid, options: Options):
