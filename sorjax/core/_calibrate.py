@@ -55,12 +55,15 @@ def calibrate(points: Float[Array, "V M 2"], method: str = "bundle", aspect=jnp.
     return calibrate_homologies(points, homs, method, aspect, options=options, image_size=image_size, valid=valid)
 
 
-def fit_homologies(points: Float[Array, "V M 2"], options: Options = Options(), sequential: bool = False
+def fit_homologies(points: Float[Array, "V M 2"], options: Options = Options(), sequential: bool | None = None
                    ) -> ViewHomologies:
     """Every view's harmonic homology (eq. 20, automatic start, robust), in pixels:
     :func:`prepare_views`, :func:`fit_views`, :func:`homologies_in_pixels`.
     ``sequential`` (static): the views one after another (``jax.lax.map``; on a CPU
-    faster and far quicker to compile) instead of ``jax.vmap``."""
+    faster and far quicker to compile) instead of ``jax.vmap``; None (default): on
+    the CPU only."""
+    if sequential is None:
+        sequential = jax.default_backend() == "cpu"
     views = prepare_views(points, options.n_samples)
     return homologies_in_pixels(views, fit_views(views, options, sequential=sequential), options)
 
