@@ -87,7 +87,8 @@ def _common(points, homs: ViewHomologies, valid, options: Options) -> _Common:
     radius = outline_radius(points)
     drop = view_verdicts(homs.rms, homs.rms_untrimmed, radius, homs.is_conic, homs.trimmed, valid, options)
     used = drop == USED
-    T = joint_transform(points, used)
+    # the normalisation is a constant for differentiation (K in pixels does not depend on it)
+    T = jax.lax.stop_gradient(joint_transform(points, used))
     return _Common(
         radius=radius, drop=drop, used=used, n_used=jnp.sum(used),
         all_inf=jnp.all(jnp.where(used, homs.at_infinity, True)), T=T, rms_u=jnp.where(used, homs.rms, jnp.nan),
