@@ -110,7 +110,9 @@ def test_vmap_calibrated_intrinsics_over_trials(scene, calibration):
               for t in range(3)]
     batched = _fit_trials(P, _stack(starts))
     assert batched.shape == (3, 4)
-    _close(batched, _stack([_fit(P[t], starts[t]) for t in range(3)]))
+    # a batched solve and a single one stop within the solver's tolerance of each other
+    # (seen: 1.1e-10 relative), not bit for bit
+    _close(batched, _stack([_fit(P[t], starts[t]) for t in range(3)]), rtol=1e-8, atol=1e-8)
     assert len({float(x) for x in batched[:, 1]}) == 3  # the trials differ
 
 
