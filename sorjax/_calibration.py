@@ -222,11 +222,6 @@ SMALL_OUTLINE_RAD = 0.15
 _NAMES = ("fu", "fv", "u0", "v0")
 
 
-def _outline_radius(outline) -> float:
-    p = np.asarray(outline.points)
-    return float(np.sqrt(np.mean(np.sum((p - p.mean(0)) ** 2, axis=1))))
-
-
 def _axis_spread_deg(ls: np.ndarray) -> float:
     """Largest angle (degrees, 0..90) between the directions of the imaged axes."""
     t = np.arctan2(ls[:, 1], ls[:, 0])

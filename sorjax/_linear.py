@@ -138,25 +138,6 @@ def method_i(v, l, *, finite_tol: float = 1e-9, weighted: bool = True, used=None
     return f, f, x0[0], x0[1], ok
 
 
-@functools.partial(jax.jit, static_argnames=("method",))
-def linear_in_pixels(v_pix, l_pix, TA, weights=None, *, method: str):
-    """Run ``method`` ("I", "IIa" or "IIb") on pixel homologies (V, 3) in the
-    coordinates ``x' = TA x`` (``TA = T A``: a normalising similarity ``T`` after the
-    aspect-ratio map ``A = diag(1/a, 1, 1)``, eqs. 24-26) and map the result back.
-
-    Returns ``(K, omega, ok)`` in pixels: ``K = (TA)^-1 K'`` and
-    ``omega = (TA)^T omega' (TA)``, one compiled call per method (no per-op dispatch)."""
-    v = v_pix @ TA.T
-    l = l_pix @ jnp.linalg.inv(TA)
-    if method == "I":
-        fu, fv, u0, v0, ok = method_i(v, l)
-    else:
-        fu, fv, u0, v0, ok, _ = method_ii(v, l, unit_aspect=(method == "IIb"), weights=weights)
-    K = jnp.linalg.solve(TA, intrinsics_matrix(fu, fv, u0, v0))
-    omega = TA.T @ omega_matrix(omega_vector_from_intrinsics(fu, fv, u0, v0)) @ TA
-    return K, omega, ok
-
-
 # ------------------------------------------------------------------ masked, pure
 #
 # The functional core's linear methods: views are masked, never removed (a (V,) bool

@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Float
 
+from ._bundle import BundleProblem, axis_params, residuals, unpack_intrinsics
 from ._camera import normalising_transform, omega_matrix, omega_vector_from_intrinsics, pixel_intrinsics
 from ._field import DistanceField, curve_points, sample_weights, setup, signed_distance, signed_distances
 from ._field import make_field as _make_field
@@ -112,39 +113,15 @@ class BundleStart(eqx.Module):
                    None if a is None else float(a))
 
 
-def _chart_intrinsics(k, aspect):
-    """``(fu, fv, u0, v0)`` of the chart ``k = (log fu, log fv, u0, v0)`` (free aspect)
-    or ``(log fv, u0, v0)`` with ``fu = aspect fv``."""
-    if k.shape[-1] == 4:
-        return jnp.exp(k[0]), jnp.exp(k[1]), k[2], k[3]
-    fv = jnp.exp(k[0])
-    return aspect * fv, fv, k[1], k[2]
-
-
-def _chart_residuals(y, args) -> Float[Array, " VN"]:
-    """The bundle's residuals (normalised units) in its solver chart ``y = (k, a)``:
-    intrinsics ``k`` (:func:`_chart_intrinsics`) and per view ``a = (theta, rho)``,
-    ``l_s = (cos theta, sin theta, -rho)``, ``v_x = omega^-1 l_s`` (the chart of
-    :mod:`sorjax._bundle`, kept here so that this public loss stands on its own)."""
-    k, a = y
-    fields, samples, weights, aspect = args
-    omega = omega_matrix(omega_vector_from_intrinsics(*_chart_intrinsics(k, aspect)))
-    l = jnp.stack([jnp.cos(a[:, 0]), jnp.sin(a[:, 0]), -a[:, 1]], axis=-1)
-    v = jnp.linalg.solve(omega, l.T).T
-    v = v / jnp.linalg.norm(v, axis=-1, keepdims=True)
-    return jax.vmap(symmetry_residuals)(v, l, samples, fields, weights).reshape(-1)
-
-
 def _start_chart(T, start: BundleStart, n_views: int):
-    """The solver chart's ``y0`` of ``start`` in the coordinates ``x_n = T x``."""
+    """The bundle's solver chart (:func:`sorjax._bundle.unpack_intrinsics`,
+    :func:`sorjax._bundle.axis_params`) at ``start``, in the coordinates ``x_n = T x``."""
     Kn = T @ start.K
     if start.aspect_ratio is None:
         k0 = jnp.stack([jnp.log(Kn[0, 0]), jnp.log(Kn[1, 1]), Kn[0, 2], Kn[1, 2]])
     else:
         k0 = jnp.stack([jnp.log(Kn[1, 1]), Kn[0, 2], Kn[1, 2]])
-    l = start.l_s @ jnp.linalg.inv(T)  # lines map by T^-T
-    l = l / jnp.linalg.norm(l[:, :2], axis=-1, keepdims=True)
-    a0 = jnp.stack([jnp.arctan2(l[:, 1], l[:, 0]), -l[:, 2]], axis=-1)
+    a0 = axis_params(start.l_s @ jnp.linalg.inv(T))  # lines map by T^-T
     if a0.shape[0] != n_views:
         raise ValueError(f"the start has {a0.shape[0]} axes l_s for {n_views} outlines")
     return k0, a0
@@ -182,14 +159,14 @@ def calibrated_intrinsics(
     fields, samples, weights = jax.vmap(lambda p: setup(p, n_samples))(pn)
     a = start.aspect_ratio
     y0 = jax.lax.stop_gradient(_start_chart(T, start, points.shape[0]))
-    args = (fields, samples, weights, jnp.asarray(1.0 if a is None else a, jnp.float64))
-    sol = optx.least_squares(_chart_residuals, _TIGHT, y0, args=args, max_steps=max_steps, throw=False)
+    args = BundleProblem(fields, samples, weights, jnp.asarray(jnp.nan if a is None else a, jnp.float64))
+    sol = optx.least_squares(residuals, _TIGHT, y0, args=args, max_steps=max_steps, throw=False)
     # Levenberg-Marquardt may stop on a step its damping shrank (~1e-9 short of the
     # optimum); a few undamped Gauss-Newton steps settle it to rounding, which finite
     # differences of a single outline point (1e-4 px) need.  Gradients: implicit, at
     # this optimum (the first solve's output is only a start).
     sol = optx.least_squares(
-        _chart_residuals, _POLISH, jax.lax.stop_gradient(sol.value), args=args, max_steps=_POLISH_STEPS,
+        residuals, _POLISH, jax.lax.stop_gradient(sol.value), args=args, max_steps=_POLISH_STEPS,
         throw=False, adjoint=optx.ImplicitAdjoint(),
     )
-    return pixel_intrinsics(T, *_chart_intrinsics(sol.value[0], args[3]))
+    return pixel_intrinsics(T, *unpack_intrinsics(sol.value[0], args.aspect))

@@ -114,7 +114,7 @@ def _linear_cov(c: _Common, K, a_m, options: Options):
                                  options.n_samples)
 
 
-def _check(points, homs, valid, image_size, aspect):
+def _check(points, valid, image_size, aspect):
     points = jnp.asarray(points, jnp.float64)
     valid = jnp.ones(points.shape[0], bool) if valid is None else jnp.asarray(valid, bool)
     image_size = _nan(2) if image_size is None else jnp.asarray(image_size, jnp.float64)
@@ -126,7 +126,7 @@ def calibrate_homologies(points: Float[Array, "V M 2"], homs: ViewHomologies, me
     """:func:`calibrate` from per-view homologies already fitted (pixels)."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}; got {method!r}")
-    points, valid, image_size, aspect = _check(points, homs, valid, image_size, aspect)
+    points, valid, image_size, aspect = _check(points, valid, image_size, aspect)
     c = _common(points, homs, valid, options)
     if method == "bundle":
         return _finish(points, homs, c, method, aspect, image_size, options, bundle=_bundle(c, homs, aspect, options))
@@ -145,7 +145,7 @@ def calibrate_methods(points: Float[Array, "V M 2"], homs: ViewHomologies, metho
     for m in methods:
         if m not in METHODS:
             raise ValueError(f"method must be one of {METHODS}; got {m!r}")
-    points, valid, image_size, _ = _check(points, homs, valid, image_size, jnp.nan)
+    points, valid, image_size, _ = _check(points, valid, image_size, jnp.nan)
     aspects = jnp.asarray(aspects, jnp.float64).reshape(len(methods))
     c = _common(points, homs, valid, options)
     ib = [i for i, m in enumerate(methods) if m == "bundle"]
