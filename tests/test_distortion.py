@@ -1,0 +1,128 @@
+"""sorjax._distortion: OpenCV's radial model (k1, k2) and its Newton inverse, against
+cv2.projectPoints / cv2.undistortPoints, against each other, and differentiated."""
+
+import cv2
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from sorjax._distortion import (distort, distort_normalised, monotone_radius, opencv_coefficients, undistort,
+                                undistort_normalised)
+
+K = np.array([[620.0, 0.0, 331.0], [0.0, 610.0, 236.0], [0.0, 0.0, 1.0]])
+COEFFS = [(-0.3, 0.0), (-0.15, 0.0), (0.1, 0.0), (-0.25, 0.08), (0.12, -0.04)]
+
+
+def _points(k, n=400, seed=0):
+    """Pixel points of a 640x480 image within 0.9 of the model's monotone radius."""
+    rng = np.random.default_rng(seed)
+    x = rng.uniform([0.0, 0.0], [639.0, 479.0], size=(n, 2))
+    m = (x - K[:2, 2]) / np.diag(K)[:2]
+    r = np.linalg.norm(m, axis=1)
+    rmax = 0.9 * float(monotone_radius(np.asarray(k)))
+    scale = np.where(r > rmax, rmax / np.maximum(r, 1e-300), 1.0)
+    return K[:2, 2] + (m * scale[:, None]) * np.diag(K)[:2]
+
+
+@pytest.mark.parametrize("k", COEFFS)
+def test_distort_equals_cv2_project_points(k):
+    x = _points(k)
+    m = (x - K[:2, 2]) / np.diag(K)[:2]
+    obj = np.column_stack([m, np.ones(len(m))])
+    ref, _ = cv2.projectPoints(obj, np.zeros(3), np.zeros(3), K, opencv_coefficients(k))
+    np.testing.assert_allclose(np.asarray(distort(x, K, np.asarray(k))), ref[:, 0], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("k", COEFFS)
+def test_undistort_equals_cv2_undistort_points(k):
+    xd = np.asarray(distort(_points(k), K, np.asarray(k)))
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15)
+    ref = cv2.undistortPoints(xd[:, None, :], K, opencv_coefficients(k), P=K, criteria=crit)[:, 0]
+    np.testing.assert_allclose(np.asarray(undistort(xd, K, np.asarray(k))), ref, rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("k", COEFFS)
+def test_round_trip_to_1e_10_px(k):
+    x = _points(k)
+    k = np.asarray(k)
+    back = np.asarray(undistort(distort(x, K, k), K, k))
+    assert np.max(np.abs(back - x)) < 1e-10
+    again = np.asarray(distort(undistort(x, K, k), K, k))
+    inside = np.linalg.norm(np.asarray(undistort(x, K, k)) - K[:2, 2], axis=1) / 620.0 < 0.9 * float(monotone_radius(k))
+    assert np.max(np.abs(again - x)[inside]) < 1e-10
+
+
+def test_one_coefficient_equals_k2_zero_and_the_frame_cancels():
+    x = _points((-0.2, 0.0), 50)
+    a = distort(x, K, jnp.array([-0.2]))
+    np.testing.assert_array_equal(np.asarray(a), np.asarray(distort(x, K, jnp.array([-0.2, 0.0]))))
+    # a similarity T: distort(T x, T K) = T distort(x, K)
+    T = np.array([[1 / 250.0, 0, -1.3], [0, 1 / 250.0, -0.9], [0, 0, 1]])
+    xn = x @ T[:2, :2].T + T[:2, 2]
+    np.testing.assert_allclose(np.asarray(distort(xn, T @ K, jnp.array([-0.2]))),
+                               np.asarray(a) @ T[:2, :2].T + T[:2, 2], atol=1e-13)
+
+
+def test_jit_vmap_clean():
+    ks = jnp.array([[-0.3, 0.0], [0.1, -0.02], [-0.1, 0.05]])
+    x = jnp.asarray(_points((-0.3, 0.0), 20))
+    f = jax.jit(jax.vmap(lambda k: undistort(distort(x, K, k), K, k)))
+    out = f(ks)
+    assert out.shape == (3, 20, 2) and out.dtype == jnp.float64
+    for i in range(3):
+        np.testing.assert_allclose(np.asarray(out[i]), np.asarray(undistort(distort(x, K, ks[i]), K, ks[i])),
+                                   atol=1e-12)
+
+
+def _fd(f, z, h=1e-6):
+    z = np.asarray(z, np.float64)
+    cols = []
+    for i in range(z.size):
+        e = np.zeros_like(z)
+        e.flat[i] = h
+        cols.append((np.asarray(f(z + e)) - np.asarray(f(z - e))) / (2 * h))
+    return np.stack(cols, axis=-1)
+
+
+@pytest.mark.parametrize("k", [(-0.3, 0.0), (0.1, -0.04)])
+def test_gradients_match_finite_differences(k):
+    """Jacobians of both maps in the point, the coefficients and K's entries; and the
+    second derivative of undistort in k1 (the bundle's implicit gradient uses Hessians)."""
+    x0 = np.array([512.0, 401.0])
+    kk = np.asarray(k)
+    Kv = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
+
+    def Km(v):
+        return jnp.array([[v[0], 0.0, v[2]], [0.0, v[1], v[3]], [0.0, 0.0, 1.0]])
+
+    for fun in (distort, undistort):
+        for name, g, z in (
+            ("x", lambda z: fun(z, K, kk), x0),
+            ("k", lambda z: fun(x0, K, z), kk),
+            ("K", lambda z: fun(x0, Km(z), kk), Kv),
+        ):
+            J = np.asarray(jax.jacfwd(g)(jnp.asarray(z)))
+            Jr = np.asarray(jax.jacrev(g)(jnp.asarray(z)))
+            num = _fd(g, z, h=1e-6 * max(1.0, float(np.max(np.abs(z)))))
+            np.testing.assert_allclose(J, num, rtol=1e-6, atol=1e-6, err_msg=f"{fun.__name__} d/d{name}")
+            np.testing.assert_allclose(Jr, J, rtol=1e-12, atol=1e-12)
+    # second derivative in k1 of the undistorted point
+    g1 = jax.grad(lambda k1: undistort(x0, K, jnp.stack([k1, kk[1]]))[0])
+    h2 = float(jax.grad(g1)(kk[0]))
+    num = (float(g1(kk[0] + 1e-5)) - float(g1(kk[0] - 1e-5))) / 2e-5
+    assert abs(h2 - num) < 1e-5 * max(1.0, abs(num))
+
+
+def test_normalised_maps_and_monotone_radius():
+    k = jnp.array([-0.3, 0.0])
+    R = float(monotone_radius(k))
+    assert abs(R - (1 / 0.9) ** 0.5) < 1e-12
+    assert np.isinf(float(monotone_radius(jnp.array([0.1, 0.0]))))
+    m = jnp.array([[0.0, 0.0], [0.3, -0.2]])
+    np.testing.assert_allclose(np.asarray(undistort_normalised(distort_normalised(m, k), k)), np.asarray(m), atol=1e-15)
+    # smooth at the principal point: finite gradient there
+    g = jax.jacfwd(lambda z: undistort_normalised(z, k))(jnp.zeros(2))
+    np.testing.assert_allclose(np.asarray(g), np.eye(2), atol=1e-15)
+    np.testing.assert_array_equal(opencv_coefficients([-0.2, 0.05]), [-0.2, 0.05, 0, 0, 0])
+    np.testing.assert_array_equal(opencv_coefficients([-0.2]), [-0.2, 0, 0, 0, 0])
