@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ._files import atomic_path, write_text
+
 NAMES = ("fu", "fv", "u0", "v0")
 
 
@@ -19,25 +21,24 @@ def write_camera(cal, path, image_size: tuple[int, int], sources=()) -> tuple[Pa
     computed).  Returns both paths."""
     import cv2
 
-    path = Path(path)
-    if path.suffix.lower() not in (".yaml", ".yml", ".xml"):
-        path = path.with_suffix(".yaml")
-    path.parent.mkdir(parents=True, exist_ok=True)
+    path, twin = camera_paths(path)
     K = np.asarray(cal.K, dtype=np.float64)
     std = np.asarray(cal.std, dtype=np.float64).reshape(1, 4)
-    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
-    try:
-        fs.write("image_width", int(image_size[0]))
-        fs.write("image_height", int(image_size[1]))
-        fs.write("camera_matrix", K)
-        fs.write("intrinsics_std", std)
-        fs.write("distortion_coefficients", np.zeros((1, 5)))
-        fs.write("method", str(cal.method))
-        fs.write("views_used", int(len(cal.used)))
-    finally:
-        fs.release()
-    twin = path.with_suffix(".json")
-    twin.write_text(json.dumps(dict(
+    with atomic_path(path) as tmp:  # a temporary file beside it, renamed when complete
+        fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
+        if not fs.isOpened():
+            raise OSError(f"{path}: could not open the file for writing")
+        try:
+            fs.write("image_width", int(image_size[0]))
+            fs.write("image_height", int(image_size[1]))
+            fs.write("camera_matrix", K)
+            fs.write("intrinsics_std", std)
+            fs.write("distortion_coefficients", np.zeros((1, 5)))
+            fs.write("method", str(cal.method))
+            fs.write("views_used", int(len(cal.used)))
+        finally:
+            fs.release()
+    write_text(twin, json.dumps(dict(
         image_width=int(image_size[0]), image_height=int(image_size[1]), camera_matrix=K.tolist(),
         intrinsics=dict(zip(NAMES, map(float, (cal.fu, cal.fv, cal.u0, cal.v0)))),
         intrinsics_std=dict(zip(NAMES, [None if not np.isfinite(s) else float(s) for s in std[0]])),
@@ -49,6 +50,16 @@ def write_camera(cal, path, image_size: tuple[int, int], sources=()) -> tuple[Pa
         perspective_z=_finite_or_none(getattr(cal, "perspective_z", float("nan"))),
     ), indent=1))
     return path, twin
+
+
+def camera_paths(path) -> tuple[Path, Path]:
+    """The two files :func:`write_camera` writes for ``path``: the YAML (``path``
+    itself when it ends in .yaml, .yml or .xml, else with the suffix .yaml) and its
+    JSON twin (the YAML's path with the suffix .json)."""
+    path = Path(path)
+    if path.suffix.lower() not in (".yaml", ".yml", ".xml"):
+        path = path.with_suffix(".yaml")
+    return path, path.with_suffix(".json")
 
 
 def _finite_or_none(x):
@@ -110,7 +121,7 @@ def draw_overlay(image, views, path) -> Path:
         cv2.putText(img, label, (int(c[0]) + 5, int(c[1]) - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 255), 1,
                     cv2.LINE_AA)
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), img):
-        raise ValueError(f"{path}: could not write the overlay image")
+    with atomic_path(path) as tmp:
+        if not cv2.imwrite(str(tmp), img):
+            raise OSError(f"{path}: could not write the overlay image")
     return path
