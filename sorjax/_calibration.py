@@ -20,6 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
+from ._checks import check_sizes
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
 from ._outline import DEFAULT_POINTS, as_outlines
 from .core._assess import ASYMMETRIC, COLLAPSED_FOCAL, CONIC, MASKED, PP_OUTSIDE, TRIMMED, USED, WIDE_FOV
@@ -134,9 +135,9 @@ def _check_method(method: str, aspect_ratio):
     if method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(map(repr, METHODS))}; got {method!r}.")
     if aspect_ratio is not None:
-        if not isinstance(aspect_ratio, (int, float, np.floating, np.integer)) or not (
-            math.isfinite(aspect_ratio) and aspect_ratio > 0
-        ):
+        if isinstance(aspect_ratio, (bool, np.bool_)) or not isinstance(
+            aspect_ratio, (int, float, np.floating, np.integer)
+        ) or not (math.isfinite(aspect_ratio) and aspect_ratio > 0):
             raise ValueError(f"aspect_ratio must be a positive finite number (fu / fv); got {aspect_ratio!r}.")
         if method == "IIa":
             raise ValueError(
@@ -323,12 +324,7 @@ def _implausible_text(code: int, est, outs, image_size=None) -> str:
     return ""  # pragma: no cover
 
 
-def _check_sizes(n_samples, n_points):
-    for name, val, lo in (("n_samples", n_samples, 10), ("n_points", n_points, 64)):
-        if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < lo:
-            raise ValueError(f"{name} must be an integer >= {lo}; got {val!r}.")
-    if n_samples > n_points:
-        raise ValueError(f"n_samples ({n_samples}) must not exceed n_points ({n_points}).")
+_check_sizes = check_sizes  # n_samples, n_points: the same rules as fit_homology's (sorjax._checks)
 
 
 def _check_homologies(homologies, n_views):
@@ -632,7 +628,8 @@ def calibrate(
     if image_size is not None:
         try:
             iw, ih = (int(x) for x in image_size)
-            if iw <= 0 or ih <= 0 or (iw, ih) != tuple(image_size):
+            if iw <= 0 or ih <= 0 or (iw, ih) != tuple(image_size) or any(isinstance(x, (bool, np.bool_))
+                                                                            for x in image_size):
                 raise ValueError
         except (TypeError, ValueError):
             raise ValueError(f"image_size must be (width, height) in pixels, two positive integers; got "
