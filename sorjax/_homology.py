@@ -51,6 +51,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from ._checks import boolean, check_sizes, integer, number
 from ._field import DistanceField, closest_parameter, signed_distances
 from ._outline import DEFAULT_POINTS, make_outline, perimeter
 
@@ -187,6 +188,27 @@ def _fit_core(points, init, options, smooth):
     return pixel_homology(fit, T, options)
 
 
+def _check_init(init):
+    """``init`` as two float64 3-vectors ``(v_x, l_s)``, or None; ValueError otherwise."""
+    if init is None:
+        return None
+    what = ("init must be (v_x, l_s): the starting vertex and axis, two homogeneous 3-vectors in pixels "
+            "(e.g. (np.array([0, 1, 0]), np.array([1, 0, -320])) for a vertical axis x = 320)")
+    try:
+        v, l = (np.asarray(a, dtype=np.float64) for a in init)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what}; got {init!r:.80}.") from None
+    if v.shape != (3,) or l.shape != (3,):
+        raise ValueError(f"{what}; got shapes {v.shape} and {l.shape}.")
+    if not (np.all(np.isfinite(v)) and np.all(np.isfinite(l))):
+        raise ValueError(f"{what}; got NaN or infinite entries.")
+    if not np.any(v) or np.hypot(l[0], l[1]) == 0.0:
+        raise ValueError(f"{what}; v_x is zero or l_s is the line at infinity.")
+    if abs(v @ l) <= 1e-12 * np.linalg.norm(v) * np.linalg.norm(l):
+        raise ValueError(f"{what}; v_x lies on l_s (v_x . l_s = 0), where the homology is not defined.")
+    return v, l
+
+
 def fit_homology(
     outline,
     *,
@@ -220,16 +242,27 @@ def fit_homology(
     Returns:
         :class:`Homology` in pixels, with the RMS symmetry residual in px.
 
+    Raises:
+        ValueError: a bad outline, or an option out of range (``n_samples`` an integer
+        >= 10 and <= ``n_points``, ``n_points`` 64 to 65536, ``max_steps`` >= 1,
+        ``smooth_px`` >= 0, ``robust`` a bool, ``init`` two 3-vectors with
+        ``v_x . l_s != 0``), naming the option.
+
     The fit is :func:`sorjax.core._viewfit.fit_view` (pure, jit / vmap-able), run once
     under ``jax.jit``.
     """
+    n_samples, n_points = check_sizes(n_samples, n_points)
+    max_steps = integer(max_steps, "max_steps", lo=1, hi=100_000, what="steps of each polishing solve")
+    smooth_px = number(smooth_px, "smooth_px", lo=0.0, unit="px of arc length")
+    robust = boolean(robust, "robust")
+    init = _check_init(init)
     o = make_outline(outline, n_points)
     pts = np.asarray(o.points)
     smooth = float(smooth_px) / (perimeter(pts) / o.n_points) if smooth_px else 0.0
     options = Options(n_samples=int(n_samples), max_steps=int(max_steps),
                       trim_rounds=Options().trim_rounds if robust else 0)
     if init is not None:
-        init = tuple(jnp.asarray(np.asarray(a, dtype=np.float64)) for a in init)
+        init = tuple(jnp.asarray(a) for a in init)
     h = _fit_core(jnp.asarray(pts), init, options, smooth)
     if not np.isfinite(float(h.cost)):
         raise FloatingPointError("every start of the homology fit gave a non-finite cost")

@@ -19,9 +19,17 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._checks import MAX_POINTS as MAX_RESAMPLED
+from ._checks import MIN_POINTS as MIN_RESAMPLED
+from ._checks import integer
+
 DEFAULT_POINTS = 2048
 MIN_POINTS = 10
 MIN_EXTENT_PX = 10.0
+# Pixel coordinates of any image lie well within this (a gigapixel panorama is ~1e5
+# px across); beyond it squared distances and areas lose all precision or overflow
+# (coordinates near 1e200 gave NaN outlines and numpy LinAlgErrors).
+MAX_COORDINATE_PX = 1e7
 
 
 class Outline(eqx.Module):
@@ -88,8 +96,8 @@ def _segments_cross(p: np.ndarray) -> bool:
 def validate_points(points, *, name: str = "outline") -> np.ndarray:
     """Check a user's outline and return it as a clean (N, 2) float64 numpy array.
 
-    Raises ValueError for: wrong shape or dtype, NaN/inf, fewer than 10 distinct
-    points, a curve smaller than 10 px, an open curve, a point visited twice (a curve
+    Raises ValueError for: wrong shape or dtype, NaN/inf, coordinates beyond
+    ``MAX_COORDINATE_PX`` (1e7 px), fewer than 10 distinct points, a curve smaller than 10 px, an open curve, a point visited twice (a curve
     that touches itself or is traced more than once), a self-intersecting curve, zero
     area.
     """
@@ -130,6 +138,12 @@ def validate_points(points, *, name: str = "outline") -> np.ndarray:
         raise ValueError(
             f"{name}: {int(bad.sum())} of {len(arr)} points are NaN or infinite "
             f"(first at row {int(np.argmax(bad))}). Remove them before calibrating."
+        )
+    far = float(np.max(np.abs(arr)))
+    if far > MAX_COORDINATE_PX:
+        raise ValueError(
+            f"{name}: has coordinates up to {far:.3g} px; pixel coordinates of an image lie within "
+            f"+-{MAX_COORDINATE_PX:.0e} px. Pass the outline in pixels of its image (not scaled or offset)."
         )
     # drop consecutive duplicates and a closing repeat of the first point
     keep = np.ones(len(arr), bool)
@@ -215,7 +229,9 @@ SPARSE_SPACING_PX = 3.0  # mean spacing above which a short outline is called sp
 
 def make_outline(points, n_points: int = DEFAULT_POINTS, *, name: str = "outline") -> Outline:
     """Validate ``points`` (N, 2 pixels; an :class:`Outline` passes through), orient
-    them positively and resample to ``n_points`` evenly spaced points."""
+    them positively and resample to ``n_points`` evenly spaced points (an integer,
+    64 to 65536)."""
+    n_points = integer(n_points, "n_points", lo=MIN_RESAMPLED, hi=MAX_RESAMPLED, what="points of the resampled outline")
     if isinstance(points, Outline) and points.n_points == n_points:
         return points
     arr = validate_points(points, name=name)
