@@ -54,8 +54,9 @@ from jaxtyping import Array, Float
 
 from ._camera import intrinsics_matrix, omega_matrix, omega_vector_from_intrinsics
 from ._camera import pixel_intrinsics as _pixel_intrinsics
-from ._field import DistanceField, setup
-from ._homology import symmetry_feet, symmetry_residuals
+from ._distortion import distort, undistort
+from ._field import DistanceField, closest_parameter, setup, signed_distances
+from ._homology import homology_matrix, symmetry_feet, symmetry_residuals, transfer
 from ._linear import linear_estimates
 from ._solvers import NULL_RCOND, Solved, is_stale, polish_traced, solvers, until_fresh_traced
 from .core._options import Options
@@ -64,7 +65,9 @@ from .core._options import Options
 class BundleProblem(eqx.Module):
     """Everything the bundle's residuals need besides its parameters (normalised
     coordinates): per-view fields (stacked pytree), samples (V, N, 2) and their
-    weights (V, N), the known aspect ratio (NaN for free aspect).
+    weights (V, N), the known aspect ratio (NaN for free aspect), and ``n_dist``
+    (static): the number of radial distortion coefficients in the model (0: the
+    pinhole bundle; 1: k1; 2: k1, k2; see :func:`distorted_transfer`).
 
     A view left out (masked, :func:`make_problem`) keeps its slot with all weights
     zero: its residuals are zero and its ``(theta, rho)`` have zero Jacobian columns
@@ -76,6 +79,7 @@ class BundleProblem(eqx.Module):
     samples: Float[Array, "V N 2"]
     weights: Float[Array, "V N"]
     aspect: Float[Array, ""]
+    n_dist: int = eqx.field(static=True, default=0)
 
     @property
     def used(self):
@@ -102,13 +106,21 @@ def unpack_intrinsics(k, aspect):
     return aspect * fv, fv, k[1], k[2]
 
 
+def split_params(k, problem):
+    """``(intrinsic chart, distortion coefficients)`` of the bundle's ``k``: with
+    ``problem.n_dist = n > 0`` its last ``n`` entries are ``(k1[, k2])``; with none,
+    ``(k, None)``."""
+    n = problem.n_dist
+    return (k, None) if n == 0 else (k[:-n], k[-n:])
+
+
 def n_params(y, problem) -> Float[Array, ""]:
     """The number of free parameters in ``y = (k, a)``: the intrinsics ``k`` (less the
     ignored ``k[0]`` of the padded chart when the aspect ratio is known,
-    :func:`unpack_intrinsics`) and two per *used* view (a masked view's ``(theta,
-    rho)`` touch no residual)."""
+    :func:`unpack_intrinsics`; distortion coefficients included) and two per *used*
+    view (a masked view's ``(theta, rho)`` touch no residual)."""
     nk = y[0].shape[-1]
-    padded = nk == 4
+    padded = nk - problem.n_dist == 4
     n_used = jnp.sum(problem.used).astype(jnp.float64)
     return nk + 2.0 * n_used - (jnp.isfinite(problem.aspect).astype(jnp.float64) if padded else 0.0)
 
@@ -154,16 +166,49 @@ def pole_polar_pairs(y, problem: BundleProblem):
     """Per-view ``(v_x, l_s)`` for ``y = (k, (theta, rho))``: ``l_s = (cos theta,
     sin theta, -rho)``, ``v_x = omega^-1 l_s`` (unit norm); (V, 3) each."""
     k, a = y
-    omega = omega_matrix(omega_vector_from_intrinsics(*unpack_intrinsics(k, problem.aspect)))
+    omega = omega_matrix(omega_vector_from_intrinsics(*unpack_intrinsics(split_params(k, problem)[0], problem.aspect)))
     l = jnp.stack([jnp.cos(a[:, 0]), jnp.sin(a[:, 0]), -a[:, 1]], axis=-1)
     v = jnp.linalg.solve(omega, l.T).T  # omega is symmetric: v_j = omega^-1 l_j
     return v / jnp.linalg.norm(v, axis=-1, keepdims=True), l
 
 
+def distorted_transfer(y, problem: BundleProblem) -> Float[Array, "V N 2"]:
+    """Each sample moved by its view's symmetry in the distorted image (normalised
+    units), for a problem with distortion (``problem.n_dist > 0``)::
+
+        x' = D(W u),   u = D^-1(x),   D(u) = K' d(K'^-1 u)
+
+    ``x`` a sample of the observed (distorted) outline, ``D`` the radial distortion
+    :func:`sorjax._distortion.distort` about the principal point in camera-normalised
+    coordinates ``K'^-1 u`` (``K' = T K`` the intrinsics in the bundle's normalised
+    frame: the similarity ``T`` cancels, and the coefficients are those of pixels),
+    ``D^-1`` its Newton inverse, ``W`` the homology of the pinhole (undistorted) image.
+    A masked view is mapped with zero distortion (its weights are zero; no NaN from its
+    placeholder outline)."""
+    k, d = split_params(y[0], problem)
+    Kn = intrinsics_matrix(*unpack_intrinsics(k, problem.aspect))
+    v, l = pole_polar_pairs(y, problem)
+    dv = jnp.where(problem.used[:, None], d, 0.0)
+
+    def one(v, l, x, d):
+        return distort(transfer(homology_matrix(v, l), undistort(x, Kn, d)), Kn, d)
+
+    return jax.vmap(one)(v, l, problem.samples, dv)
+
+
 def residuals(y, problem: BundleProblem, hints=None) -> Float[Array, " VN"]:
     """Stacked eq.-20 residuals of all views (normalised units) for ``y = (k, a)``;
     ``hints`` (V, N): closest-point parameters to search near (:func:`foot_parameters`
-    of a nearby ``y``), or None to search each whole outline."""
+    of a nearby ``y``), or None to search each whole outline.  With distortion
+    (``problem.n_dist > 0``) each sample is moved by :func:`distorted_transfer` and read
+    from its outline's own (distorted) distance field."""
+    if problem.n_dist:
+        x = distorted_transfer(y, problem)
+        if hints is None:
+            r = jax.vmap(signed_distances)(problem.fields, x)
+        else:
+            r = jax.vmap(signed_distances)(problem.fields, x, hints)
+        return (r * problem.weights).reshape(-1)
     v, l = pole_polar_pairs(y, problem)
     if hints is None:
         r = jax.vmap(symmetry_residuals)(v, l, problem.samples, problem.fields, problem.weights)
@@ -174,7 +219,11 @@ def residuals(y, problem: BundleProblem, hints=None) -> Float[Array, " VN"]:
 
 def foot_parameters(y, problem: BundleProblem) -> Float[Array, "V N"]:
     """Per view and sample, the parameter of the outline's point closest to the
-    transferred sample ``W_j x_ij`` (knot units; whole-outline search, no gradient)."""
+    transferred sample ``W_j x_ij`` (knot units; whole-outline search, no gradient;
+    with distortion the sample of :func:`distorted_transfer`)."""
+    if problem.n_dist:
+        x = distorted_transfer(y, problem)
+        return jax.vmap(lambda f, x: jax.vmap(closest_parameter, in_axes=(None, 0))(f, x))(problem.fields, x)
     v, l = pole_polar_pairs(y, problem)
     return jax.vmap(symmetry_feet)(v, l, problem.samples, problem.fields)
 
@@ -298,7 +347,7 @@ def solution_in_pixels(y, problem: BundleProblem, T):
     """``(K, omega, v_x, l_s)`` in pixels for the parameters ``y`` (normalised by the
     similarity ``T``): ``K = T^-1 K'``, unit ``v_x`` and ``l_s = omega v_x`` with
     ``a^2 + b^2 = 1``, one row per view."""
-    K = jnp.linalg.solve(T, intrinsics_matrix(*unpack_intrinsics(y[0], problem.aspect)))
+    K = jnp.linalg.solve(T, intrinsics_matrix(*unpack_intrinsics(split_params(y[0], problem)[0], problem.aspect)))
     Ki = jnp.linalg.inv(K)
     v, l = pole_polar_pairs(y, problem)
     vx = v @ jnp.linalg.inv(T).T
@@ -310,9 +359,19 @@ def solution_in_pixels(y, problem: BundleProblem, T):
 NULL_EIGENVALUE = NULL_RCOND**2  # 1e-12: the Gauss-Newton polish takes no step where this calls null
 
 
+def pixel_params(k, problem: BundleProblem, T):
+    """The pixel intrinsics ``(fu, fv, u0, v0)`` of the chart ``k`` (normalised by the
+    similarity ``T``), followed by the distortion coefficients ``(k1[, k2])`` when the
+    problem has them (dimensionless: the same in every frame)."""
+    kk, d = split_params(k, problem)
+    p = _pixel_intrinsics(T, *unpack_intrinsics(kk, problem.aspect))
+    return p if d is None else jnp.concatenate([p, d])
+
+
 @jax.jit
 def covariance(y, problem: BundleProblem, T):
-    """Covariance of the pixel intrinsics ``(fu, fv, u0, v0)`` at ``y``; returns
+    """Covariance of the pixel intrinsics ``(fu, fv, u0, v0)`` at ``y`` (followed by
+    ``(k1[, k2])`` with distortion, :func:`pixel_params`); returns
     ``(cov, s2, step)`` with ``s2 = |r|^2 / (VN - p)`` (normalised units^2) and ``step``
     the Gauss-Newton step's Mahalanobis length (:func:`step_sigmas`).
 
@@ -346,14 +405,14 @@ def covariance(y, problem: BundleProblem, T):
     g = J.T @ r  # the Gauss-Newton step's length in standard deviations (step_sigmas)
     step = jnp.sqrt(jnp.maximum(g @ jnp.linalg.pinv(J.T @ J, hermitian=True) @ g, 0.0) / jnp.maximum(s2, 1e-300))
 
-    Gk = jax.jacfwd(lambda k: _pixel_intrinsics(T, *unpack_intrinsics(k, problem.aspect)))(y[0])
+    Gk = jax.jacfwd(lambda k: pixel_params(k, problem, T))(y[0])
     cov = Gk @ cov_k @ Gk.T
-    GU = Gk @ U  # (4, nk): each pixel intrinsic along each eigenvector
+    GU = Gk @ U  # (4 [+ n_dist], nk): each pixel intrinsic along each eigenvector
     leak = jnp.sum(jnp.where(null[None, :], GU**2, 0.0), axis=1)
     undetermined = leak > 1e-8 * jnp.sum(GU**2, axis=1)
     bad = undetermined[:, None] | undetermined[None, :]
     cov = jnp.where(bad, jnp.nan, cov)
-    cov = jnp.where(jnp.eye(4, dtype=bool) & bad, jnp.inf, cov)
+    cov = jnp.where(jnp.eye(cov.shape[0], dtype=bool) & bad, jnp.inf, cov)
     return cov, s2, step
 
 
@@ -484,15 +543,7 @@ def fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Optio
     S = ks.shape[0]
     # the seeds to try first, by cost (ties: the first given); the others last
     order = jnp.lexsort((jnp.arange(S), costs, ~seed_ok))
-
-    def run(y, method):
-        def once(y):
-            y_end, res, n, r, stale = solve(y, problem, max_steps=max_steps, method=method)
-            return (res == optx.RESULTS.successful, r), y_end, n, stale
-
-        (ok, r), y_end, steps = until_fresh_traced(once, y)
-        return Solved(y_end, ok, jnp.sum(r**2), steps, r)
-
+    run = _runner(problem, max_steps)
     n_res = problem.weights.size
 
     def cond(c):
@@ -503,13 +554,7 @@ def fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Optio
         i, _, have, best_bad, best_cost, best_y, best_r, total = c
         j = order[i]
         final, steps = polish_traced(run, (ks[j], a0), costs[j])
-        y, cost = final.y, final.cost
-        finite = jnp.isfinite(cost)
-        # stopped by the step limit, but as good as stationary
-        stationary = jax.lax.cond(~final.ok & finite, lambda: step_sigmas(y, problem) < STATIONARY_SIGMAS,
-                                  lambda: jnp.asarray(False))
-        ok = (final.ok | stationary) & finite
-        cost = jnp.where(finite, cost, jnp.inf)
+        y, ok, cost = _converged(final, problem)
         better = ~have | (best_bad & ok) | ((best_bad == ~ok) & (cost < best_cost))
         pick = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(better, a, b), new, old)  # noqa: E731
         return (i + 1, ok, jnp.asarray(True), jnp.where(better, ~ok, best_bad), jnp.where(better, cost, best_cost),
@@ -519,6 +564,33 @@ def fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Optio
             jnp.asarray(jnp.inf), (ks[order[0]], a0), jnp.full(n_res, jnp.nan), jnp.asarray(0, jnp.int32))
     _, _, _, bad, _, y, r, total = jax.lax.while_loop(cond, body, init)
     return y, ~bad, total, r
+
+
+def _runner(problem: BundleProblem, max_steps: int):
+    """``run(y, method) -> Solved``: :func:`solve` from ``y``, repeated from its end
+    while stale (:func:`sorjax._solvers.until_fresh_traced`); what
+    :func:`sorjax._solvers.polish_traced` polishes with."""
+
+    def run(y, method):
+        def once(y):
+            y_end, res, n, r, stale = solve(y, problem, max_steps=max_steps, method=method)
+            return (res == optx.RESULTS.successful, r), y_end, n, stale
+
+        (ok, r), y_end, steps = until_fresh_traced(once, y)
+        return Solved(y_end, ok, jnp.sum(r**2), steps, r)
+
+    return run
+
+
+def _converged(final: Solved, problem: BundleProblem):
+    """``(y, ok, cost)`` of a polish: converged, or stopped by its step limit but as
+    good as stationary (:data:`STATIONARY_SIGMAS`), with a finite cost (else inf)."""
+    y, cost = final.y, final.cost
+    finite = jnp.isfinite(cost)
+    stationary = jax.lax.cond(~final.ok & finite, lambda: step_sigmas(y, problem) < STATIONARY_SIGMAS,
+                              lambda: jnp.asarray(False))
+    ok = (final.ok | stationary) & finite
+    return y, ok, jnp.where(finite, cost, jnp.inf)
 
 
 # A solve that stops at its step limit still counts as converged when the Gauss-Newton
@@ -643,6 +715,130 @@ def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, opt
         view_rms=jnp.where(used, jnp.sqrt(jnp.mean(rv**2, axis=1)), nan),
         steps=steps, ok=ok & jnp.all(jnp.isfinite(K)), evidence=evidence, n=jnp.sum(problem.weights),
     )
+
+
+# ------------------------------------------------------------ radial distortion (issue 18)
+
+DISTORTION_MODELS = {"none": 0, "k1": 1, "k1k2": 2}  # name -> number of radial coefficients
+
+
+def fit_distorted(problem: BundleProblem, y_free, options: Options = Options()):
+    """The bundle with distortion (``problem.n_dist = n > 0``) polished from the
+    distortion-free solution ``y_free = (k (4,), a (V, 2))`` with zero distortion,
+    ``(concat(k, 0_n), a)``: Gauss-Newton, Levenberg-Marquardt as the fallback
+    (:func:`sorjax._solvers.polish_traced`), each solve repeated while stale, accepted
+    at its step limit when as good as stationary (as :func:`fit_bundle`).  Pure.
+
+    Returns ``(y, ok, steps)``: ``y = (k (4 + n,), a (V, 2))``."""
+    k0, a0 = y_free
+    y0 = (jnp.concatenate([k0, jnp.zeros(problem.n_dist, k0.dtype)]), a0)
+    cost0 = jnp.sum(residuals(y0, problem) ** 2)
+    final, steps = polish_traced(_runner(problem, options.bundle_max_steps), y0, cost0)
+    y, ok, _ = _converged(final, problem)
+    return y, ok, steps
+
+
+class DistortedBundleOut(eqx.Module):
+    """The bundle with radial distortion (:func:`bundle_estimate_distorted`), all arrays.
+
+    Attributes:
+        fit: the :class:`BundleOut` of the fit with distortion.  Its ``K``, ``omega``,
+            ``v_x``, ``l_s`` are those of the pinhole (undistorted) image; ``y = (k (4 +
+            n,), a)`` with ``k``'s last ``n`` entries ``(k1[, k2])``; ``cov`` the (4, 4)
+            block of ``(fu, fv, u0, v0)`` (px^2); ``s2``, ``cost``, ``view_rms`` of the
+            fit's residuals (px^2, px^2, px); ``evidence`` for perspective: the cost of
+            the best camera with no perspective (fitted without distortion: in that
+            limit the normalised radii, so the distortion, vanish) minus this fit's
+            cost (px^2).
+        k: (n,) the distortion coefficients ``(k1[, k2])``: OpenCV's radial terms
+            (dimensionless; camera-normalised coordinates ``K^-1 x``).
+        k_std: (n,) their standard deviations (inf where the views do not determine
+            them).
+        cov: (4 + n, 4 + n) joint covariance of ``(fu, fv, u0, v0, k1[, k2])`` (px^2 in
+            the intrinsics' block, px in the cross terms, none in ``k``'s).
+        free: the :class:`BundleOut` of the distortion-free bundle (the seed).
+        delta: ``free.cost - fit.cost`` (px^2): how much the distortion model lowers
+            the cost, the evidence for distortion (:func:`distortion_gate`).
+        ok: both fits converged and the estimate is finite (bool).
+    """
+
+    fit: BundleOut
+    k: Float[Array, " n"]
+    k_std: Float[Array, " n"]
+    cov: Float[Array, "p p"]
+    free: BundleOut
+    delta: Float[Array, ""]
+    ok: Array
+
+
+@functools.partial(jax.jit, static_argnames=("distortion",))
+def bundle_estimate_distorted(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options: Options = Options(),
+                              distortion: str = "k1") -> DistortedBundleOut:
+    """The joint bundle with OpenCV's radial distortion, ``2V + 4 + n`` parameters
+    (``n = 1`` for "k1", 2 for "k1k2"; ``2V + 3 + n`` for a known aspect ratio): each
+    sample ``x`` of an observed outline is undistorted, moved by its view's homology,
+    distorted again and read from the outline's own distance field
+    (:func:`distorted_transfer`).  The distortion-free bundle (:func:`bundle_estimate`)
+    runs first; the distorted fit is polished from its solution with zero distortion
+    (:func:`fit_distorted`).  Pure: jit, vmap over trials (``distortion`` static,
+    ``options`` unbatched), grad (implicit, :func:`implicit_solution`).
+
+    Args: as :func:`bundle_estimate` (``points_n`` (V, M, 2) observed, i.e. distorted,
+    outline points in the normalised frame ``x_n = T x``; ``T`` (3, 3) the normalising
+    similarity; ``seeds`` (S, 4) normalised; ``aspect`` NaN: free), and
+    ``distortion``: "k1" or "k1k2".
+
+    Returns a :class:`DistortedBundleOut` (pixels; ``k`` dimensionless)."""
+    n = DISTORTION_MODELS.get(distortion, 0)
+    if n == 0:
+        raise ValueError(f"distortion must be 'k1' or 'k1k2' (use bundle_estimate for none); got {distortion!r}")
+    free = bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options)
+    used = jnp.asarray(used, bool)
+    T = jnp.asarray(T, jnp.float64)
+    base = make_problem(points_n, options.n_samples, aspect, inliers, used)
+    problem = BundleProblem(base.fields, base.samples, base.weights, base.aspect, n)
+    fixed = jax.lax.stop_gradient(problem)
+    y, ok, steps = fit_distorted(fixed, jax.lax.stop_gradient(free.y), options)
+    y = implicit_solution(y, problem)
+    cov, s2, _ = covariance(y, problem, T)
+    K, omega, vx, ls = solution_in_pixels(y, problem, T)
+    scale = 1.0 / T[0, 0]
+    V = used.shape[0]
+    rv = residuals(y, problem).reshape(V, -1) * scale
+    cost = jnp.sum(rv**2)
+    nan = jnp.asarray(jnp.nan)
+    ok = ok & jnp.all(jnp.isfinite(K)) & jnp.all(jnp.isfinite(y[0]))
+    fit = BundleOut(
+        y=y, K=K, omega=omega,
+        v_x=jnp.where(used[:, None], vx, nan), l_s=jnp.where(used[:, None], ls, nan),
+        cov=cov[:4, :4], s2=s2 * scale**2, cost=cost,
+        view_rms=jnp.where(used, jnp.sqrt(jnp.mean(rv**2, axis=1)), nan),
+        steps=steps, ok=ok, evidence=free.evidence + free.cost - cost, n=jnp.sum(problem.weights),
+    )
+    k = split_params(y[0], problem)[1]
+    return DistortedBundleOut(fit=fit, k=k, k_std=jnp.sqrt(jnp.diagonal(cov)[4:]), cov=cov, free=free,
+                              delta=free.cost - cost, ok=ok & free.ok)
+
+
+def distortion_gate(delta_px2, n, s_px, options: Options = Options(), z_min: float = 3.0, factor: float = 3.0):
+    """``(ok, g_px, z)``: whether the outlines support the distortion model, as
+    :func:`sorjax.core._assess.perspective_gate` decides for perspective.
+
+    ``delta_px2`` the cost (px^2) by which the distortion-free bundle fits worse
+    (:attr:`DistortedBundleOut.delta`) over ``n`` samples, ``s_px`` the residual standard
+    deviation of the fit with distortion (``sqrt(fit.s2)``): ``g_px = sqrt(delta / n)``
+    (RMS per sample) and ``z = sqrt(delta) / s_px`` (for one extra parameter and
+    Gaussian residuals ``delta / s^2`` is chi-square with one degree of freedom: z = 3
+    is a 3-sigma test).  ``ok`` when ``z >= z_min`` and ``g_px >= factor *
+    options.outline_error_px`` (the declared systematic outline error, which the
+    residuals do not show).  ``z_min`` and ``factor``: defaults as the perspective
+    gate's (Options.perspective_z, perspective_factor)."""
+    import dataclasses
+
+    from .core._assess import perspective_gate
+
+    opts = dataclasses.replace(options, perspective_z=z_min, perspective_factor=factor)
+    return perspective_gate(delta_px2, n, s_px, opts)
 
 
 @functools.partial(jax.jit, static_argnames=("n_samples",))

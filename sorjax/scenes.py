@@ -70,6 +70,19 @@ Exact silhouettes
   silhouette (max penetration below ``1e-10`` times the object size, i.e. far below
   1e-6 px for the scenes built here).
 
+Lens distortion
+---------------
+Every scene function takes ``distortion=(k1, k2)`` (default None: a pinhole camera,
+every result as without the argument): OpenCV's radial model about the principal point
+in camera-normalised coordinates, ``m_d = (1 + k1 |m|^2 + k2 |m|^4) m``, ``x = K m_d``
+(:mod:`sorjax._distortion`).  A view's outline is then the pinhole silhouette mapped
+exactly through the distortion (the map is one-to-one where it is used: every pinhole
+outline point must lie within 0.9 of the model's monotone radius,
+:func:`sorjax._distortion.monotone_radius`, else ValueError), traced densely enough
+that the distorted points are still at most ``spacing`` apart;
+:attr:`ViewTruth.outline_pinhole` keeps the pinhole outline, and ``l_s``, ``v_x``, ``W``
+are those of the pinhole image (the distortion-free model the calibration estimates).
+
 Noise
 -----
 :func:`paper_noise` (the paper's smoothed uniform noise along the normal) and
@@ -121,6 +134,7 @@ __all__ = [
     "outline_normals",
     "paper_noise",
     "gaussian_noise",
+    "distort_outline",
 ]
 
 SeedLike = Union[int, np.integer, np.random.Generator]
@@ -149,6 +163,9 @@ class ViewTruth:
         Harmonic homology ``I - 2 v_x l_s^T / (v_x . l_s)``; maps the outline onto itself.
     P : (3, 4) float64
         Camera matrix ``K [R | t]`` of this view (object/world to pixels).
+    outline_pinhole : (M', 2) float64 or None
+        With lens distortion: the pinhole (undistorted) outline, which ``W`` maps onto
+        itself and which :attr:`outline` is the distorted image of; None without.
     """
 
     outline: np.ndarray
@@ -156,6 +173,7 @@ class ViewTruth:
     v_x: np.ndarray
     W: np.ndarray
     P: np.ndarray
+    outline_pinhole: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -173,6 +191,8 @@ class Scene:
         Generator).
     description : str
         Human-readable account of the scene (object, camera, poses).
+    distortion : (k1, k2) or None
+        OpenCV radial distortion coefficients of the camera (None: a pinhole camera).
     """
 
     K: np.ndarray
@@ -180,6 +200,7 @@ class Scene:
     image_size: tuple[int, int]
     seed: int | None
     description: str
+    distortion: tuple[float, float] | None = None
 
     @property
     def outlines(self) -> list[np.ndarray]:
@@ -356,10 +377,12 @@ def harmonic_homology(v, l) -> np.ndarray:
     return np.eye(3) - 2.0 * np.outer(v, l) / den
 
 
-def view_truth(K, R, t, outline, *, axis_point=(0.0, 0.0, 0.0), axis_direction=(0.0, 1.0, 0.0)) -> ViewTruth:
+def view_truth(K, R, t, outline, *, axis_point=(0.0, 0.0, 0.0), axis_direction=(0.0, 1.0, 0.0),
+               outline_pinhole=None) -> ViewTruth:
     """The :class:`ViewTruth` of a view: ``l_s``, ``v_x`` and ``W`` from the formulas of the
     module docstring, for the revolution axis through ``axis_point`` along
-    ``axis_direction`` (world/object coordinates)."""
+    ``axis_direction`` (world/object coordinates).  ``outline_pinhole``: with lens
+    distortion, the undistorted outline (``outline`` being the distorted one)."""
     K = _check_K(K)
     R, t = _as_pose((R, t))
     P = camera_matrix(K, R, t)
@@ -380,7 +403,9 @@ def view_truth(K, R, t, outline, *, axis_point=(0.0, 0.0, 0.0), axis_direction=(
     if l @ v < 0:
         l = -l
     outline = np.ascontiguousarray(outline, dtype=np.float64)
-    return ViewTruth(outline=outline, l_s=l, v_x=v, W=harmonic_homology(v, l), P=P)
+    if outline_pinhole is not None:
+        outline_pinhole = np.ascontiguousarray(outline_pinhole, dtype=np.float64)
+    return ViewTruth(outline=outline, l_s=l, v_x=v, W=harmonic_homology(v, l), P=P, outline_pinhole=outline_pinhole)
 
 
 # ----------------------------------------------------------------------------------
@@ -796,6 +821,14 @@ def _two_sphere_outline(P: np.ndarray, spacing: float) -> np.ndarray:
     return img
 
 
+def _distortion_note(k) -> str:
+    return "" if k is None else f", radial distortion k1={k[0]:g} k2={k[1]:g}"
+
+
+def _as_pair(k):
+    return None if k is None else (float(k[0]), float(k[1]))
+
+
 def _check_in_image(img: np.ndarray, image_size, what: str) -> None:
     w, h = image_size
     if img[:, 0].min() < 0 or img[:, 1].min() < 0 or img[:, 0].max() > w - 1 or img[:, 1].max() > h - 1:
@@ -806,6 +839,54 @@ def _check_in_image(img: np.ndarray, image_size, what: str) -> None:
         )
 
 
+def _check_distortion(distortion):
+    """``None`` or the float64 (2,) ``(k1, k2)`` of a ``distortion`` argument."""
+    if distortion is None:
+        return None
+    k = np.asarray(distortion, dtype=np.float64).reshape(-1)
+    if k.shape != (2,) or not np.all(np.isfinite(k)):
+        raise ValueError(f"distortion must be None or finite (k1, k2), got {distortion!r}")
+    return k
+
+
+def distort_outline(outline, K, distortion, what: str = "outline") -> np.ndarray:
+    """Pinhole outline points (M, 2, pixels) mapped through the radial distortion
+    ``(k1, k2)`` about ``K``'s principal point (:func:`sorjax._distortion.distort`,
+    exact), point ``i`` the image of point ``i``.  Raises ValueError when a
+    point lies beyond 0.9 of the model's monotone radius (where it folds or is close
+    to folding: no longer a one-to-one, invertible image)."""
+    from ._distortion import distort, monotone_radius
+
+    K = _check_K(K)
+    k = _check_distortion(distortion)
+    x = np.asarray(outline, dtype=np.float64)
+    m = np.linalg.solve(K, np.column_stack([x, np.ones(len(x))]).T).T[:, :2]
+    rmax = 0.9 * float(monotone_radius(k))
+    rho = float(np.max(np.hypot(m[:, 0], m[:, 1])))
+    if rho > rmax:
+        raise ValueError(f"{what}: reaches normalised radius {rho:.3f}, beyond 0.9 of where the distortion "
+                         f"k = ({k[0]:g}, {k[1]:g}) stops being one-to-one ({rmax:.3f})")
+    return np.asarray(distort(x, K, k))
+
+
+def _traced_distorted(trace: Callable[[float], np.ndarray], K, k, spacing: float, what: str):
+    """``(outline, pinhole outline or None)``: ``trace(spacing)`` (a pinhole outline at
+    that spacing) distorted by ``k`` (None: as it is), retraced finer when the
+    distortion stretches it beyond ``spacing``; both rolled to start at the distorted
+    outline's top-most point (point ``i`` of one is the image of point ``i`` of the
+    other)."""
+    pts = trace(spacing)
+    if k is None:
+        return pts, None
+    d = distort_outline(pts, K, k, what)
+    gap = float(np.max(np.hypot(*(np.roll(d, -1, axis=0) - d).T)))
+    if gap > spacing:
+        pts = trace(spacing * 0.98 * spacing / gap)
+        d = distort_outline(pts, K, k, what)
+    top = -int(np.argmin(d[:, 1]))
+    return np.roll(d, top, axis=0), np.roll(pts, top, axis=0)
+
+
 def two_spheres(
     f: float = 700.0,
     *,
@@ -814,6 +895,7 @@ def two_spheres(
     aspect_ratio: float = 1.0,
     principal_point: Sequence[float] | None = None,
     spacing: float = 0.3,
+    distortion: Sequence[float] | None = None,
 ) -> Scene:
     """The paper's synthetic scene (Section 8): two intersecting spheres, 1 to 8 views.
 
@@ -846,22 +928,25 @@ def two_spheres(
     is the boundary of the union of the two filled ellipses (the arc of each ellipse
     outside the other, sampled through the exact parametric form, with the two
     corners found by bisection to machine precision), spacing <= ``spacing`` px.
+    ``distortion``: ``(k1, k2)`` radial lens distortion (module docstring; None: none).
     """
+    k = _check_distortion(distortion)
     w, h = image_size
     pp = (w / 2.0, h / 2.0) if principal_point is None else principal_point
     K = intrinsics(f, aspect_ratio=aspect_ratio, principal_point=pp)
     views = []
     for i, (R, t) in enumerate(two_spheres_poses(f, n_views, image_size=image_size, aspect_ratio=aspect_ratio)):
         P = camera_matrix(K, R, t)
-        img = _two_sphere_outline(P, spacing)
+        img, pin = _traced_distorted(lambda sp, P=P: _two_sphere_outline(P, sp), K, k, spacing, f"two_spheres view {i}")
         _check_in_image(img, image_size, f"two_spheres view {i}")
-        views.append(view_truth(K, R, t, img))
+        views.append(view_truth(K, R, t, img, outline_pinhole=pin))
     desc = (
         f"two intersecting spheres (radii 1.0 and 0.75, centres 1.2 apart), f={f:g}, "
         f"aspect ratio {aspect_ratio:g}, principal point ({pp[0]:g}, {pp[1]:g}), {n_views} views "
         f"from TWO_SPHERES_VIEWS[:{n_views}]"
-    )
-    return Scene(K=K, views=tuple(views), image_size=(int(w), int(h)), seed=None, description=desc)
+    ) + _distortion_note(k)
+    return Scene(K=K, views=tuple(views), image_size=(int(w), int(h)), seed=None, description=desc,
+                 distortion=_as_pair(k))
 
 
 # ----------------------------------------------------------------------------------
@@ -1426,6 +1511,7 @@ def sor_scene(
     spacing: float = 0.3,
     allow_outside: bool = False,
     description: str | None = None,
+    distortion: Sequence[float] | None = None,
 ) -> Scene:
     """Scene of the solid ``profile`` seen by the camera ``K`` from each pose.
 
@@ -1435,22 +1521,25 @@ def sor_scene(
     the axis (object Y axis through the origin).  Raises ValueError when a pose puts the
     camera inside the object or the object partly behind the camera, when the outline
     cannot be built, or when it leaves the image (unless ``allow_outside``).
-    ``seed`` is only recorded.
+    ``seed`` is only recorded.  ``distortion``: ``(k1, k2)`` radial lens distortion
+    (module docstring; None: none).
     """
     K = _check_K(K)
+    k = _check_distortion(distortion)
     if len(poses) == 0:
         raise ValueError("need at least one pose")
     views = []
     for i, pose in enumerate(poses):
         R, t = _as_pose(pose)
-        sil = sor_silhouette(profile, K, R, t, spacing=spacing)
+        img, pin = _traced_distorted(lambda sp, R=R, t=t: sor_silhouette(profile, K, R, t, spacing=sp).points,
+                                     K, k, spacing, f"view {i}")
         if not allow_outside:
-            _check_in_image(sil.points, image_size, f"view {i}")
-        views.append(view_truth(K, R, t, sil.points))
+            _check_in_image(img, image_size, f"view {i}")
+        views.append(view_truth(K, R, t, img, outline_pinhole=pin))
     if description is None:
-        description = f"SOR {profile.name!r} in {len(views)} views, K = {np.round(K, 3).tolist()}"
+        description = f"SOR {profile.name!r} in {len(views)} views, K = {np.round(K, 3).tolist()}" + _distortion_note(k)
     return Scene(K=K, views=tuple(views), image_size=(int(image_size[0]), int(image_size[1])),
-                 seed=seed, description=description)
+                 seed=seed, description=description, distortion=_as_pair(k))
 
 
 def _random_pose(rng, profile: Profile, K, image_size, lying: bool):
@@ -1501,6 +1590,7 @@ def random_sor_scene(
     min_size_px: float = 80.0,
     min_axis_angle_deg: float = 15.0,
     max_tries: int = 200,
+    distortion: Sequence[float] | None = None,
 ) -> Scene:
     """A random SOR scene, deterministic given ``seed``.
 
@@ -1518,7 +1608,12 @@ def random_sor_scene(
       the image, spans less than ``min_size_px`` px, or when the line of sight to the
       object centre is within ``min_axis_angle_deg`` of the axis.  ``v_x`` may be
       anywhere (even very far away).
+    * ``distortion``: ``(k1, k2)`` radial lens distortion (module docstring; None:
+      none, the same scene as without the argument); a pose is also redrawn when the
+      distorted outline leaves the image or reaches where the model folds.  The
+      random draws do not depend on it except through such redraws.
     """
+    kd = _check_distortion(distortion)
     rng, recorded = _rng(seed)
     if n_views < 1:
         raise ValueError("n_views must be >= 1")
@@ -1549,14 +1644,15 @@ def random_sor_scene(
             if cosang > math.cos(math.radians(min_axis_angle_deg)):
                 continue
             try:
-                sil = sor_silhouette(profile, K, R, t, spacing=spacing)
-                _check_in_image(sil.points, image_size, "random view")
+                img, pin = _traced_distorted(lambda sp, R=R, t=t: sor_silhouette(profile, K, R, t, spacing=sp).points,
+                                             K, kd, spacing, "random view")
+                _check_in_image(img, image_size, "random view")
             except ValueError:
                 continue
-            ext = sil.points.max(0) - sil.points.min(0)
+            ext = img.max(0) - img.min(0)
             if ext.max() < min_size_px:
                 continue
-            views.append(view_truth(K, R, t, sil.points))
+            views.append(view_truth(K, R, t, img, outline_pinhole=pin))
             infos.append(info)
             break
         else:
@@ -1564,9 +1660,10 @@ def random_sor_scene(
     desc = (
         f"random SOR scene (seed={recorded}): {'perturbed ' if perturb else ''}{name}, "
         f"fu={K[0, 0]:.1f} fv={K[1, 1]:.1f} u0={K[0, 2]:.1f} v0={K[1, 2]:.1f}; views: "
-        + "; ".join(infos)
+        + "; ".join(infos) + _distortion_note(kd)
     )
-    return Scene(K=K, views=tuple(views), image_size=(int(w), int(h)), seed=recorded, description=desc)
+    return Scene(K=K, views=tuple(views), image_size=(int(w), int(h)), seed=recorded, description=desc,
+                 distortion=_as_pair(kd))
 
 
 # ----------------------------------------------------------------------------------

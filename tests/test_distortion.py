@@ -126,3 +126,48 @@ def test_normalised_maps_and_monotone_radius():
     np.testing.assert_allclose(np.asarray(g), np.eye(2), atol=1e-15)
     np.testing.assert_array_equal(opencv_coefficients([-0.2, 0.05]), [-0.2, 0.05, 0, 0, 0])
     np.testing.assert_array_equal(opencv_coefficients([-0.2]), [-0.2, 0, 0, 0, 0])
+
+
+# ------------------------------------------------------------- scenes with distortion
+
+
+def _gap(d):
+    return float(np.max(np.hypot(*(np.roll(d, -1, axis=0) - d).T)))
+
+
+def test_scenes_distort_the_pinhole_silhouette_exactly():
+    from sorjax import scenes
+
+    plain = scenes.two_spheres(f=700.0, n_views=2)
+    same = scenes.two_spheres(f=700.0, n_views=2, distortion=None)
+    for a, b in zip(plain.views, same.views):
+        np.testing.assert_array_equal(a.outline, b.outline)
+        assert b.outline_pinhole is None
+    assert same.distortion is None
+    for k in ((-0.3, 0.05), (0.1, 0.0)):  # barrel: spacing shrinks; pincushion: retraced finer
+        sc = scenes.two_spheres(f=700.0, n_views=2, distortion=k)
+        assert sc.distortion == k
+        for v in sc.views:
+            back = np.asarray(undistort(v.outline, sc.K, np.asarray(k)))
+            assert np.max(np.abs(back - v.outline_pinhole)) < 1e-10
+            assert _gap(v.outline) <= 0.3 and int(np.argmin(v.outline[:, 1])) == 0
+            assert scenes._signed_area(v.outline) > 0
+            # the homology maps the pinhole outline onto itself, not the distorted one
+            h = np.column_stack([v.outline_pinhole, np.ones(len(v.outline_pinhole))]) @ v.W.T
+            assert np.max(scenes.distance_to_polyline(h[:, :2] / h[:, 2:], v.outline_pinhole)) < 1e-3
+            h = np.column_stack([v.outline, np.ones(len(v.outline))]) @ v.W.T
+            assert np.max(scenes.distance_to_polyline(h[:, :2] / h[:, 2:], v.outline)) > 0.5
+
+
+def test_random_scene_with_distortion_and_the_fold():
+    from sorjax import scenes
+
+    K = scenes.intrinsics(450.0)
+    sc = scenes.random_sor_scene(5, 2, K=K, distortion=(-0.3, 0.0))
+    assert sc.distortion == (-0.3, 0.0) and "k1=-0.3" in sc.description
+    for v in sc.views:
+        m = (v.outline_pinhole - K[:2, 2]) / 450.0
+        assert np.max(np.hypot(m[:, 0], m[:, 1])) <= 0.9 * float(monotone_radius(np.array([-0.3, 0.0])))
+        assert v.outline.min() >= 0 and v.outline[:, 0].max() <= 639 and v.outline[:, 1].max() <= 479
+    with pytest.raises(ValueError, match="one-to-one"):
+        scenes.two_spheres(f=700.0, n_views=1, distortion=(-3.0, 0.0))

@@ -1,0 +1,111 @@
+"""The bundle with radial distortion (sorjax._bundle.bundle_estimate_distorted) on exact
+distorted scenes (sorjax.scenes ... distortion=(k1, k2)): K and k recovered, the
+evidence for distortion, the distortion-free path untouched.
+
+Three views of M = 1024 points, 100 samples, as tests/test_core_bundle.py; the "k1"
+program is compiled once (about a minute here), the "k1k2" one only under -m slow."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import sorjax
+from sorjax import scenes
+from sorjax._bundle import (BundleProblem, bundle_estimate_distorted, bundle_seeds, distortion_gate, make_problem,
+                            n_params, residuals)
+from sorjax._camera import transform_points
+from sorjax.core import Options, joint_transform
+
+F = 700.0
+M = 1024
+OPTIONS = Options()
+
+
+def _inputs(scene):
+    """bundle_estimate's arguments for a scene, seeded by its exact (pinhole) homologies."""
+    pts = np.stack([np.asarray(sorjax.make_outline(o, M).points) for o in scene.outlines])
+    v = np.stack([vw.v_x for vw in scene.views])
+    l = np.stack([vw.l_s for vw in scene.views])
+    used = np.ones(len(v), bool)
+    T = joint_transform(pts, used)
+    pn = transform_points(T, jnp.asarray(pts))
+    ln = jnp.linalg.solve(T.T, jnp.asarray(l).T).T
+    seeds, seed_ok = bundle_seeds(v, l, used, T, jnp.nan)
+    return pn, jnp.asarray(used), jnp.ones((len(v), OPTIONS.n_samples)), ln, seeds, seed_ok, jnp.asarray(jnp.nan), T
+
+
+@pytest.fixture(scope="module")
+def distorted():
+    sc = scenes.two_spheres(f=F, distortion=(-0.2, 0.0))
+    return sc, bundle_estimate_distorted(*_inputs(sc), OPTIONS, distortion="k1")
+
+
+def test_exact_on_a_noise_free_distorted_scene(distorted):
+    sc, out = distorted
+    assert bool(out.ok) and bool(out.fit.ok) and bool(out.free.ok)
+    np.testing.assert_allclose(np.asarray(out.fit.K), sc.K, atol=1e-3)  # px, 1.4e-6 of f
+    assert abs(float(out.k[0]) + 0.2) < 1e-6
+    assert out.cov.shape == (5, 5) and out.fit.cov.shape == (4, 4) and out.k_std.shape == (1,)
+    np.testing.assert_array_equal(np.asarray(out.fit.cov), np.asarray(out.cov[:4, :4]))
+    assert float(out.fit.cost) < 1e-8
+    # the distortion-free bundle is far off (distortion mimics weak perspective) and
+    # fits worse: the evidence for distortion
+    assert abs(float(out.free.K[1, 1]) - F) > 0.2 * F
+    assert float(out.delta) == pytest.approx(float(out.free.cost - out.fit.cost))
+    assert float(out.delta) > 1e3 * float(out.fit.cost)
+    assert float(out.fit.evidence) == pytest.approx(float(out.free.evidence + out.delta), rel=1e-9)
+    # residuals vanish at the truth in the normalised frame
+    args = _inputs(sc)
+    base = make_problem(args[0], OPTIONS.n_samples, None, args[2], args[1])
+    prob = BundleProblem(base.fields, base.samples, base.weights, base.aspect, 1)
+    assert float(n_params(out.fit.y, prob)) == 4 + 1 + 2 * 3
+    assert float(jnp.max(jnp.abs(residuals(out.fit.y, prob)))) < 1e-7
+
+
+def test_no_distortion_gives_zero_k_and_no_evidence(distorted):
+    sc = scenes.two_spheres(f=F)
+    out = bundle_estimate_distorted(*_inputs(sc), OPTIONS, distortion="k1")
+    assert bool(out.ok)
+    assert abs(float(out.k[0])) < 1e-6
+    np.testing.assert_allclose(np.asarray(out.fit.K), sc.K, atol=1e-3)
+    assert abs(float(out.delta)) < 1e-8
+    ok, g, z = distortion_gate(out.delta, out.fit.n, jnp.sqrt(out.fit.s2), Options(outline_error_px=0.1))
+    assert not bool(ok)
+
+
+def test_gate_follows_noise_and_outline_error():
+    n, s = 300.0, 0.2
+    ok, g, z = distortion_gate(jnp.asarray(36.0 * s**2), n, s)  # z = 6, g = 0.069 px
+    assert float(z) == pytest.approx(6.0) and float(g) == pytest.approx(np.sqrt(36 * s**2 / n))
+    assert not bool(ok)  # below 3 x the declared 0.1 px outline error
+    assert bool(distortion_gate(jnp.asarray(36.0 * s**2), n, s, Options(outline_error_px=0.0))[0])
+    assert not bool(distortion_gate(jnp.asarray(4.0 * s**2), n, s, Options(outline_error_px=0.0))[0])  # z = 2
+    assert bool(distortion_gate(jnp.asarray(300.0), n, s)[0])  # 1 px per sample
+
+
+def test_unknown_model_refused():
+    with pytest.raises(ValueError, match="k1"):
+        bundle_estimate_distorted(*_inputs(scenes.two_spheres(f=F, n_views=2)), OPTIONS, distortion="k3")
+
+
+@pytest.mark.slow
+def test_k1k2_exact_and_differentiable():
+    sc = scenes.two_spheres(f=F, n_views=4, distortion=(-0.25, 0.1))
+    args = _inputs(sc)
+    out = bundle_estimate_distorted(*args, OPTIONS, distortion="k1k2")
+    assert bool(out.ok)
+    np.testing.assert_allclose(np.asarray(out.fit.K), sc.K, atol=2e-3)
+    np.testing.assert_allclose(np.asarray(out.k), [-0.25, 0.1], atol=1e-5)
+    assert out.cov.shape == (6, 6)
+    # implicit gradient of k1 in the outline points against central differences
+    pn = args[0]
+    direction = jnp.asarray(np.random.default_rng(0).normal(size=pn.shape)) * 1e-3
+
+    def k1(t):
+        return bundle_estimate_distorted(pn + t * direction, *args[1:], OPTIONS, distortion="k1k2").k[0]
+
+    g = float(jax.grad(k1)(0.0))
+    h = 1e-3
+    num = (float(k1(h)) - float(k1(-h))) / (2 * h)
+    assert abs(g - num) < 1e-3 * max(abs(num), 1e-3)
