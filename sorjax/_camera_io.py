@@ -15,15 +15,22 @@ NAMES = ("fu", "fv", "u0", "v0")
 def write_camera(cal, path, image_size: tuple[int, int], sources=()) -> tuple[Path, Path]:
     """Write ``cal`` to ``path`` (OpenCV FileStorage YAML: ``camera_matrix``,
     ``image_width``, ``image_height``, ``intrinsics_std`` = std of (fu, fv, u0, v0)
-    in px, ``distortion_coefficients`` = zeros (not estimated), ``method``) and to
-    the same path with suffix ``.json`` (also the per-view symmetry RMS and the
-    evidence for perspective, ``perspective_px`` / ``perspective_z``; null when not
-    computed).  Returns both paths."""
+    in px, ``distortion_coefficients`` in OpenCV's order ``(k1, k2, p1, p2, k3)``,
+    ``method``) and to the same path with suffix ``.json`` (also the per-view symmetry
+    RMS and the evidence for perspective, ``perspective_px`` / ``perspective_z``; null
+    when not computed).  Returns both paths.
+
+    The distortion coefficients are :func:`distortion_coefficients` of ``cal``: its
+    estimated radial ``cal.distortion`` (k1[, k2]) when it has one, else zeros (a
+    pinhole camera); ``cv2.undistort(image, camera_matrix, distortion_coefficients)``
+    uses them as they are.  The JSON also has ``distortion`` (``k1``, ``k2``) and
+    ``distortion_std`` (from ``cal.distortion_std``), null when not estimated."""
     import cv2
 
     path, twin = camera_paths(path)
     K = np.asarray(cal.K, dtype=np.float64)
     std = np.asarray(cal.std, dtype=np.float64).reshape(1, 4)
+    dist, dist_std = distortion_coefficients(cal)
     with atomic_path(path) as tmp:  # a temporary file beside it, renamed when complete
         fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
         if not fs.isOpened():
@@ -33,7 +40,7 @@ def write_camera(cal, path, image_size: tuple[int, int], sources=()) -> tuple[Pa
             fs.write("image_height", int(image_size[1]))
             fs.write("camera_matrix", K)
             fs.write("intrinsics_std", std)
-            fs.write("distortion_coefficients", np.zeros((1, 5)))
+            fs.write("distortion_coefficients", dist.reshape(1, 5))
             fs.write("method", str(cal.method))
             fs.write("views_used", int(len(cal.used)))
         finally:
@@ -48,6 +55,9 @@ def write_camera(cal, path, image_size: tuple[int, int], sources=()) -> tuple[Pa
         view_rms_px=[float(x) for x in np.asarray(cal.view_rms)],
         perspective_px=_finite_or_none(getattr(cal, "perspective_px", float("nan"))),
         perspective_z=_finite_or_none(getattr(cal, "perspective_z", float("nan"))),
+        distortion_coefficients=dist.tolist(),
+        distortion=None if dist_std is None else dict(k1=float(dist[0]), k2=float(dist[1])),
+        distortion_std=None if dist_std is None else dict(zip(("k1", "k2"), map(_finite_or_none, dist_std))),
     ), indent=1))
     return path, twin
 
@@ -60,6 +70,31 @@ def camera_paths(path) -> tuple[Path, Path]:
     if path.suffix.lower() not in (".yaml", ".yml", ".xml"):
         path = path.with_suffix(".yaml")
     return path, path.with_suffix(".json")
+
+
+def distortion_coefficients(cal):
+    """``(coefficients (5,), std (2,) or None)``: OpenCV's ``(k1, k2, p1, p2, k3)`` of
+    ``cal.distortion`` (radial ``(k1,)`` or ``(k1, k2)``, or five OpenCV coefficients;
+    tangential terms zero) and the std of ``(k1, k2)`` (``cal.distortion_std``; NaN
+    where absent, 0 for a coefficient not estimated); zeros and None when ``cal`` has
+    no finite distortion (a pinhole camera)."""
+    from ._distortion import opencv_coefficients
+
+    k = getattr(cal, "distortion", None)
+    if k is None:
+        return np.zeros(5), None
+    k = np.asarray(k, dtype=np.float64).reshape(-1)
+    if k.size == 0 or not np.all(np.isfinite(k)):
+        return np.zeros(5), None
+    coeffs = k.copy() if k.size == 5 else opencv_coefficients(k)
+    s = getattr(cal, "distortion_std", None)
+    std = np.full(2, np.nan)
+    if s is not None:
+        s = np.asarray(s, dtype=np.float64).reshape(-1)[:2]
+        std[: s.size] = s
+    if k.size == 1:
+        std[1] = 0.0
+    return coeffs, std
 
 
 def _finite_or_none(x):

@@ -171,3 +171,60 @@ def test_random_scene_with_distortion_and_the_fold():
         assert v.outline.min() >= 0 and v.outline[:, 0].max() <= 639 and v.outline[:, 1].max() <= 479
     with pytest.raises(ValueError, match="one-to-one"):
         scenes.two_spheres(f=700.0, n_views=1, distortion=(-3.0, 0.0))
+
+
+# ------------------------------------------------- camera.yaml with distortion
+
+
+def _cal(distortion=None, distortion_std=None):
+    from types import SimpleNamespace
+
+    return SimpleNamespace(K=K, std=np.array([1.0, 1.0, 2.0, 2.0]), method="bundle", used=[0, 1, 2], fu=K[0, 0],
+                           fv=K[1, 1], u0=K[0, 2], v0=K[1, 2], aspect_ratio=None, success=True, message="ok",
+                           view_rms=[0.1, 0.2, 0.1], distortion=distortion, distortion_std=distortion_std)
+
+
+def test_camera_yaml_carries_the_distortion_for_cv2_undistort(tmp_path):
+    import json
+
+    from sorjax._camera_io import write_camera
+
+    k = np.array([-0.22, 0.04])
+    yml, js = write_camera(_cal(k, [0.003, 0.01]), tmp_path / "camera.yaml", (640, 480))
+    fs = cv2.FileStorage(str(yml), cv2.FILE_STORAGE_READ)
+    Kr, dist = fs.getNode("camera_matrix").mat(), fs.getNode("distortion_coefficients").mat()
+    fs.release()
+    np.testing.assert_array_equal(Kr, K)
+    np.testing.assert_array_equal(dist.ravel(), [-0.22, 0.04, 0.0, 0.0, 0.0])
+    doc = json.loads(js.read_text())
+    assert doc["distortion_coefficients"] == [-0.22, 0.04, 0.0, 0.0, 0.0]
+    assert doc["distortion"] == {"k1": -0.22, "k2": 0.04} and doc["distortion_std"] == {"k1": 0.003, "k2": 0.01}
+    # an image of small blobs at the distorted positions of pinhole points: cv2.undistort
+    # with the file's coefficients puts them back where the pinhole camera sees them
+    pin = np.array([[100.0, 80.0], [560.0, 90.0], [90.0, 400.0], [540.0, 410.0], [331.0, 236.0], [450.0, 300.0]])
+    xd = np.asarray(distort(pin, K, k))
+    yy, xx = np.mgrid[0:480, 0:640].astype(np.float64)
+    img = np.zeros((480, 640))
+    for p in xd:
+        img += np.exp(-((xx - p[0]) ** 2 + (yy - p[1]) ** 2) / (2 * 2.0**2))
+    und = cv2.undistort((img * 200).astype(np.float32), Kr, dist)
+    for p in pin:
+        x0, y0 = int(round(p[0])), int(round(p[1]))
+        win = und[y0 - 8:y0 + 9, x0 - 8:x0 + 9].astype(np.float64)
+        c = np.array([np.sum(win * xx[y0 - 8:y0 + 9, x0 - 8:x0 + 9]), np.sum(win * yy[y0 - 8:y0 + 9, x0 - 8:x0 + 9])])
+        assert np.linalg.norm(c / win.sum() - p) < 0.1
+
+
+def test_camera_yaml_without_distortion_writes_zeros(tmp_path):
+    import json
+
+    from sorjax._camera_io import write_camera
+
+    yml, js = write_camera(_cal(), tmp_path / "cam.yaml", (640, 480))
+    fs = cv2.FileStorage(str(yml), cv2.FILE_STORAGE_READ)
+    np.testing.assert_array_equal(fs.getNode("distortion_coefficients").mat(), np.zeros((1, 5)))
+    fs.release()
+    doc = json.loads(js.read_text())
+    assert doc["distortion"] is None and doc["distortion_std"] is None
+    _, js1 = write_camera(_cal([-0.1]), tmp_path / "one.yaml", (640, 480))
+    assert json.loads(js1.read_text())["distortion_std"] == {"k1": None, "k2": 0.0}
