@@ -29,10 +29,26 @@ points down) and starting at their top-most point, the convention of
 :mod:`sorjax.scenes`.  The traced points (about one per pixel, where the level set
 crosses the lines between pixel centres) are finally resampled evenly in arc length,
 0.5 px apart, along a Catmull-Rom curve through them.
+
+Memory
+------
+Nothing is converted or traced at the size of the whole image.  The objects are first
+located on the caller's own array (its non-zero pixels, scanned a block of rows at a
+time onto an 8 px grid), then each group of objects is converted to float64, blurred
+and traced in its own window: the window holds every pixel the blur and the tracing
+read (``4 smooth + 4`` px around the object), so the outlines equal those traced on
+the whole image (tests: to 1e-9 px).  Photographs are segmented in a window around
+each object in the same way (GrabCut, the unmixing of edge pixels).  A 20000 x 20000
+uint8 mask holding one small object costs its own 400 MB and little more
+(experiments/memory.py); a window larger than ``MAX_WINDOW_PIXELS`` (an object
+region of 60 Mpx, about 2 GB of work arrays) is refused with an error that says to
+downsample.
 """
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import math
 import warnings
 from typing import Sequence
@@ -40,11 +56,59 @@ from typing import Sequence
 import cv2
 import numpy as np
 
+from ._checks import boolean, integer, number
 from ._outline import resample_closed
 
 __all__ = ["outlines_from_mask", "outlines_from_image"]
 
 _BORDER_MODES = ("refuse", "cut", "raise")
+
+# Windows: objects are located on a grid of _BLOCK px and traced or segmented in
+# windows of at most MAX_WINDOW_PIXELS (work arrays of ~30 bytes per pixel for a mask,
+# more for a photograph's unmixing).
+_BLOCK = 8
+MAX_WINDOW_PIXELS = 60_000_000
+_CHUNK_ELEMENTS = 1 << 22  # elements per block of rows when a whole image is scanned
+
+
+def _row_blocks(H: int, W: int, multiple: int = 1):
+    """``(i0, i1)`` blocks of rows of an ``H x W`` image, each a multiple of
+    ``multiple`` rows (but the last) and about ``_CHUNK_ELEMENTS`` pixels."""
+    rows = max(multiple, (_CHUNK_ELEMENTS // max(W, 1)) // multiple * multiple)
+    for i0 in range(0, H, rows):
+        yield i0, min(H, i0 + rows)
+
+
+# Hints in messages name the API's options, or the command line's flags when it is
+# the command line that calls (:func:`command_line_hints`).
+_FOR_CLI = contextvars.ContextVar("sorjax_extract_for_cli", default=False)
+_HINTS = {
+    "label": ("pass label=VALUE to choose the object(s)",
+              "give a mask with the object(s) non-zero on a zero background"),
+    "float": ("Divide an 8-bit mask by 255, or pass a label image with label=VALUE",
+              "Save the mask as an 8-bit image (0 background, 255 object)"),
+    "min_area": ("lower min_area if the objects are really that small",
+                 "show the objects larger (the command line ignores smaller ones)"),
+    "cut": (", or pass border='cut' to keep the cut outline", ""),
+    "cut_all": ("reframe, or pass border='cut'", "reframe so that the whole objects are visible"),
+    "boxes": ("pass boxes=[(x0, y0, x1, y1), ...] around the objects, or a mask to outlines_from_mask",
+              "give boxes around the objects (--boxes FILE.json) or masks (--masks)"),
+}
+
+
+def _hint(key: str) -> str:
+    return _HINTS[key][_FOR_CLI.get()]
+
+
+@contextlib.contextmanager
+def command_line_hints():
+    """Within this block, messages give the command line's flags instead of the
+    API's options (``sorjax calibrate`` has no ``label``, ``border`` or ``min_area``)."""
+    token = _FOR_CLI.set(True)
+    try:
+        yield
+    finally:
+        _FOR_CLI.reset(token)
 
 
 # ----------------------------------------------------------------------------------
@@ -118,8 +182,11 @@ def _catmull_rom_root(f, t):
     return np.clip(np.where(bad, t, u), 0.0, 1.0)
 
 
-def _trace_level(F: np.ndarray, level: float = 0.5, cubic: bool = True) -> list[np.ndarray]:
-    """All closed ``level`` lines of the 2-D field ``F`` (x = column, y = row).
+def _trace_level(F: np.ndarray, level: float = 0.5, cubic: bool = True, offset=(0, 0)) -> list[np.ndarray]:
+    """All closed ``level`` lines of the 2-D field ``F`` (x = column, y = row), in
+    the coordinates of a larger array of which ``F`` is the window starting at column
+    ``offset[0]``, row ``offset[1]`` (the points are then the same numbers, bit for
+    bit, as when tracing that array).
 
     ``F`` must be ``level``-free on its outer ring of samples (below the level), so every
     line is closed.  Returns loops with the inside (``F >= level``) on their right as
@@ -129,13 +196,11 @@ def _trace_level(F: np.ndarray, level: float = 0.5, cubic: bool = True) -> list[
     crossing lies half-way between an inside and an outside pixel centre).
     """
     H, W = F.shape
-    inside = F >= level
-    case = (
-        inside[:-1, :-1].astype(np.int8)
-        + 2 * inside[:-1, 1:]
-        + 4 * inside[1:, 1:]
-        + 8 * inside[1:, :-1]
-    )
+    inside = (F >= level).view(np.uint8)
+    case = inside[:-1, :-1].copy()  # uint8 throughout: one byte per cell
+    case |= inside[:-1, 1:] << 1
+    case |= inside[1:, 1:] << 2
+    case |= inside[1:, :-1] << 3
     ci, cj = np.nonzero((case != 0) & (case != 15))
     if len(ci) == 0:
         return []
@@ -177,6 +242,7 @@ def _trace_level(F: np.ndarray, level: float = 0.5, cubic: bool = True) -> list[
         t = f[:, 1] / (f[:, 1] - f[:, 2])
         if cubic:
             t = _catmull_rom_root(f, t)
+        jj, ii = jj + offset[0], ii + offset[1]
         if is_h:
             pts[m] = np.column_stack([jj + t, ii.astype(np.float64)])
         else:
@@ -327,22 +393,73 @@ def _start_at_top(p: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------------
 
 
-def _unit_range(a: np.ndarray, what: str, meaning: str, fix: str, tol: float) -> np.ndarray:
-    """A float ``mask`` or ``image`` checked to be finite and within [0, 1] (+- tol),
-    returned as float64 clipped to [0, 1]; otherwise a ValueError saying how to fix it."""
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{what} contains NaN or infinite values")
-    lo, hi = float(a.min()), float(a.max())
+def _check_unit_range(a: np.ndarray, what: str, meaning: str, fix: str, tol: float) -> None:
+    """Check that a float ``mask`` or ``image`` is finite and within [0, 1] (+- tol),
+    a block of rows at a time (no copy of the whole); otherwise a ValueError saying
+    how to fix it."""
+    lo, hi = math.inf, -math.inf
+    rows = a.reshape(a.shape[0], -1)
+    for i0, i1 in _row_blocks(rows.shape[0], rows.shape[1]):
+        blk = rows[i0:i1]
+        if not np.all(np.isfinite(blk)):
+            raise ValueError(f"{what} contains NaN or infinite values")
+        lo, hi = min(lo, float(blk.min())), max(hi, float(blk.max()))
     if lo < -tol or hi > 1.0 + tol:
         raise ValueError(
             f"a float {what} must hold values in [0, 1]{' ' + meaning if meaning else ''}; got values in "
             f"[{lo:g}, {hi:g}]. {fix}"
         )
-    return np.clip(a.astype(np.float64), 0.0, 1.0)
 
 
-def _as_field(mask, label) -> np.ndarray:
-    """The mask as a float64 field in [0, 1] (1 = object), with clear errors."""
+class _Field:
+    """A validated mask seen as a field in [0, 1] (1 = object) without converting
+    the whole of it: :meth:`window` converts a window to float64, :meth:`support`
+    says which pixels of a block of rows are non-zero; ``binary`` (every value 0 or
+    1) and ``peak`` (the largest value) are of the whole field.  ``convert`` and
+    ``nonzero`` are elementwise, so a window's values are the whole field's."""
+
+    def __init__(self, m, convert, nonzero, binary: bool, peak: float):
+        self.m, self.shape = m, m.shape
+        self._convert, self._nonzero = convert, nonzero
+        self.binary, self.peak = bool(binary), float(peak)
+
+    @classmethod
+    def of_array(cls, F: np.ndarray) -> "_Field":
+        """A float64 field in [0, 1] already in memory."""
+        return cls(F, lambda a: a, lambda a: a > 0, _is_binary(F), float(F.max()))
+
+    def window(self, y0: int, y1: int, x0: int, x1: int) -> np.ndarray:
+        return np.ascontiguousarray(self._convert(self.m[y0:y1, x0:x1]), dtype=np.float64)
+
+    def support(self, i0: int, i1: int) -> np.ndarray:
+        return np.asarray(self._nonzero(self.m[i0:i1]), dtype=bool)
+
+    def any_of(self, test) -> bool:
+        """Whether ``test`` (elementwise, on the caller's values) holds anywhere."""
+        H, W = self.shape
+        return any(bool(np.any(test(self.m[i0:i1]))) for i0, i1 in _row_blocks(H, W))
+
+
+def _values_present(m: np.ndarray, limit: int = 21) -> np.ndarray:
+    """The distinct values of ``m`` (the first ``limit`` in order), a block at a time."""
+    vals = np.array([], dtype=m.dtype)
+    for i0, i1 in _row_blocks(*m.shape):
+        vals = np.union1d(vals, np.unique(m[i0:i1]))[: 1000]
+    return vals[:limit]
+
+
+def _check_label(label):
+    arr = np.asarray(label) if not isinstance(label, (str, bytes)) else np.asarray(None)
+    if isinstance(label, (bool, np.bool_)) or arr.ndim != 0 or not np.issubdtype(arr.dtype, np.number):
+        raise ValueError(f"label must be one number, the value of the object's pixels in the label image; "
+                         f"got {label!r:.60}")
+    if not math.isfinite(float(label)):
+        raise ValueError(f"label must be a finite number (the value of the object's pixels); got {label!r}")
+    return label
+
+
+def _as_field(mask, label) -> _Field:
+    """The mask as a :class:`_Field` (values in [0, 1], 1 = object), with clear errors."""
     if isinstance(mask, (str, bytes)) or mask is None:
         raise ValueError(
             f"mask must be a 2-D array (H, W), got {type(mask).__name__}; read an image file "
@@ -363,43 +480,51 @@ def _as_field(mask, label) -> np.ndarray:
         raise ValueError(f"mask must be at least 3x3 pixels, got {m.shape[0]}x{m.shape[1]}")
     if m.dtype == object or not (np.issubdtype(m.dtype, np.number) or m.dtype == bool):
         raise ValueError(f"mask must be numeric or boolean, got dtype {m.dtype}")
+    is_float = np.issubdtype(m.dtype, np.floating)
     if label is not None:
-        if np.issubdtype(m.dtype, np.floating) and not np.all(np.isfinite(m)):
+        label = _check_label(label)
+        fld = _Field(m, lambda a: (a == label).astype(np.float64), lambda a: a == label, True, 1.0)
+        if is_float and fld.any_of(lambda a: ~np.isfinite(a)):
             raise ValueError("label image contains NaN or infinite values")
-        sel = m == label
-        if not sel.any():
-            vals = np.unique(m)
+        if not fld.any_of(lambda a: a == label):
+            vals = _values_present(m)
             shown = ", ".join(str(v) for v in vals[:20]) + (" ..." if len(vals) > 20 else "")
             raise ValueError(f"label {label!r} does not occur in the label image (values present: {shown})")
-        return sel.astype(np.float64)
+        return fld
     if m.dtype == bool:
-        return m.astype(np.float64)
-    if np.issubdtype(m.dtype, np.floating):
-        return _unit_range(m, "mask", "(0 background, 1 object, fractions at anti-aliased edges)",
-                           "Divide an 8-bit mask by 255, or pass a label image with label=VALUE", 1e-9)
+        return _Field(m, lambda a: a.astype(np.float64), lambda a: a, True, 1.0 if m.any() else 0.0)
+    if is_float:
+        _check_unit_range(m, "mask", "(0 background, 1 object, fractions at anti-aliased edges)", _hint("float"), 1e-9)
+
+        def convert(a):
+            return np.clip(a.astype(np.float64), 0.0, 1.0)
+
+        fld = _Field(m, convert, lambda a: a > 0, True, min(1.0, max(0.0, float(m.max()))))
+        fld.binary = not fld.any_of(lambda a: (a > 0) & (a < 1))  # values within 1e-9 of 0 or 1 are clipped to them
+        return fld
     # integer masks
     lo, hi = int(m.min()), int(m.max())
+    full = 255.0 if hi == 255 else (65535.0 if hi == 65535 and m.dtype.itemsize == 2 else None)
     if lo >= 0 and hi <= 1:
-        return m.astype(np.float64)
-    if lo >= 0 and hi == 255:
-        return m.astype(np.float64) / 255.0  # 0/255 binary or 8-bit soft alpha
+        return _Field(m, lambda a: a.astype(np.float64), lambda a: a != 0, True, float(hi))
+    if lo >= 0 and full is not None:  # 0/255 binary or 8-bit soft alpha (16-bit: 0/65535, 0..65535)
+
+        def convert(a):
+            return a.astype(np.float64) / full
+
+        fld = _Field(m, convert, lambda a: a != 0, True, 1.0)
+        fld.binary = not fld.any_of(lambda a: (a > 0) & (a < hi))
+        return fld
     raise ValueError(
         f"integer mask with values in [{lo}, {hi}]: expected 0/1 or 0/255 (or an 8-bit soft "
-        "mask up to 255). If this is a label image (one value per object), pass label=VALUE "
-        "to choose the object(s)"
+        "mask up to 255, a 16-bit one up to 65535). If this is a label image (one value per object), "
+        f"{_hint('label')}"
     )
 
 
 def _check_options(min_area, smooth, border) -> tuple[float, float]:
-    try:
-        min_area = float(min_area)
-        smooth = float(smooth)
-    except (TypeError, ValueError):
-        raise ValueError("min_area and smooth must be numbers (pixels^2 and pixels)") from None
-    if not (math.isfinite(min_area) and min_area >= 0):
-        raise ValueError(f"min_area must be a finite number >= 0 (pixels^2), got {min_area}")
-    if not (math.isfinite(smooth) and 0 <= smooth <= 20):
-        raise ValueError(f"smooth must be between 0 and 20 pixels (Gaussian sigma), got {smooth}")
+    min_area = number(min_area, "min_area", lo=0.0, unit="pixels^2")
+    smooth = number(smooth, "smooth", lo=0.0, hi=20.0, unit="pixels (Gaussian sigma)")
     if border not in _BORDER_MODES:
         raise ValueError(f"border must be one of {_BORDER_MODES}, got {border!r}")
     return min_area, smooth
@@ -408,8 +533,58 @@ def _check_options(min_area, smooth, border) -> tuple[float, float]:
 def _blur(F: np.ndarray, sigma: float) -> np.ndarray:
     if sigma <= 0:
         return F
-    r = max(1, int(math.ceil(4.0 * sigma)))
+    r = _blur_radius(sigma)
     return cv2.GaussianBlur(F, (2 * r + 1, 2 * r + 1), sigmaX=sigma, sigmaY=sigma, borderType=cv2.BORDER_REPLICATE)
+
+
+def _blur_radius(sigma: float) -> int:
+    """Half-width (px) of :func:`_blur`'s kernel (0: no blur)."""
+    return max(1, int(math.ceil(4.0 * sigma))) if sigma > 0 else 0
+
+
+def _object_windows(field: _Field, margin: int) -> list[tuple[int, int, int, int]]:
+    """Disjoint windows ``(y0, y1, x0, x1)`` (px, ends excluded) that together hold
+    every non-zero pixel of ``field``, each at least ``margin`` px from the sides of
+    its window (or at the image border): a blur and a trace that read less than
+    ``margin`` px around a pixel see in a window what they see in the whole field.
+
+    The non-zero pixels are found a block of rows at a time and marked on a grid of
+    ``_BLOCK`` px; the marks are grown by the margin and their bounding boxes merged
+    until none overlap or touch (all on the grid: a few MB for a 20000 px image)."""
+    H, W = field.shape
+    b = _BLOCK
+    coarse = np.zeros((-(-H // b), -(-W // b)), np.uint8)
+    cols = np.arange(0, W, b)
+    for i0, i1 in _row_blocks(H, W, multiple=b):
+        nz = field.support(i0, i1)
+        rows = np.logical_or.reduceat(nz, np.arange(0, i1 - i0, b), axis=0)
+        coarse[i0 // b: -(-i1 // b)] = np.logical_or.reduceat(rows, cols, axis=1)
+    if not coarse.any():
+        return []
+    c = -(-int(margin) // b)  # a non-zero pixel lies >= c * b >= margin px inside its grown cells
+    canvas = cv2.dilate(coarse, np.ones((2 * c + 1, 2 * c + 1), np.uint8))
+    while True:
+        _, _, stats, _ = cv2.connectedComponentsWithStats(canvas, connectivity=8)
+        boxes = stats[1:]
+        if np.all(boxes[:, 4] == boxes[:, 2] * boxes[:, 3]):  # every group a filled, separate rectangle
+            break
+        canvas[:] = 0
+        for x, y, w, h, _ in boxes:
+            canvas[y:y + h, x:x + w] = 1
+    order = np.lexsort((boxes[:, 0], boxes[:, 1]))  # top to bottom, then left to right
+    return [(int(y) * b, min(H, int(y + h) * b), int(x) * b, min(W, int(x + w) * b))
+            for x, y, w, h, _ in boxes[order]]
+
+
+def _check_window(win, what: str) -> None:
+    y0, y1, x0, x1 = win
+    n = (y1 - y0) * (x1 - x0)
+    if n > MAX_WINDOW_PIXELS:
+        raise ValueError(
+            f"the {what} has an object region of {x1 - x0} x {y1 - y0} px ({n / 1e6:.0f} Mpx); outlines are traced "
+            f"at full resolution in regions of at most {MAX_WINDOW_PIXELS / 1e6:.0f} Mpx (memory). Downsample the "
+            f"image (e.g. cv2.resize with cv2.INTER_AREA) or crop it around the objects"
+        )
 
 
 def _border_sides(p: np.ndarray, shape, margin: float = 1.0) -> list[str]:
@@ -438,28 +613,46 @@ def _is_binary(F) -> bool:
     return bool(np.all((F == 0.0) | (F == 1.0)))
 
 
-def _outlines_from_field(F, *, min_area, smooth, border, what="mask", names=None):
-    """Outer 0.5-level outlines of the field F (H, W) in [0, 1]; see outlines_from_mask."""
-    H, W = F.shape
-    binary = _is_binary(F)
-    tube = binary and smooth > 0  # binary: the staircase smoothed within its band, no blur
+def _trace_window(field: _Field, win, smooth: float, tube: bool) -> list[tuple[float, np.ndarray]]:
+    """``(shoelace area, loop)`` of the 0.5 level lines in the window ``win`` of the
+    field (whole-image coordinates)."""
+    y0, y1, x0, x1 = win
+    F = field.window(y0, y1, x0, x1)
     G = F if tube else _blur(F, smooth)
     # a ring of zeros closes every level line: an object cut by the frame gets the frame
-    # (-0.5 or W - 0.5) as part of its outline
+    # (-0.5 or W - 0.5) as part of its outline (inside the image the window's ring lies
+    # where the field is zero anyway)
     G = np.pad(G, 1, mode="constant", constant_values=0.0)
-    loops = [(_shoelace(p), p - 1.0) for p in _trace_level(G, 0.5, cubic=not tube)]
+    return [(_shoelace(p), p - 1.0) for p in _trace_level(G, 0.5, cubic=not tube, offset=(x0, y0))]
+
+
+def _outlines_from_field(F, *, min_area, smooth, border, what="mask", crop=True):
+    """Outer 0.5-level outlines of the field ``F`` (an (H, W) array in [0, 1] or a
+    :class:`_Field`); see outlines_from_mask.  ``crop``: trace each group of objects
+    in its own window (:func:`_object_windows`), else the whole field at once."""
+    field = F if isinstance(F, _Field) else _Field.of_array(F)
+    H, W = field.shape
+    binary = field.binary
+    tube = binary and smooth > 0  # binary: the staircase smoothed within its band, no blur
+    # the blur reads _blur_radius px around a pixel, the cubic refinement 2 samples on each side
+    windows = _object_windows(field, _blur_radius(0.0 if tube else smooth) + 4) if crop else [(0, H, 0, W)]
+    loops = []
+    for win in windows:
+        if crop:
+            _check_window(win, what)
+        loops.extend(_trace_window(field, win, smooth, tube))
     outer = sorted([(a, p) for a, p in loops if a > 0], key=lambda ap: -ap[0])
     if not outer:
         raise ValueError(
             f"the {what} holds no object: no pixel reaches 0.5 after smoothing (max "
-            f"{float(F.max()):.3g}). Check that the object is marked with 1 (or 255) on 0, "
-            "or pass label=VALUE for a label image"
+            f"{field.peak:.3g}). Check that the object is marked with 1 (or 255) on 0, "
+            f"or {_hint('label')} in a label image"
         )
     big = [(a, p) for a, p in outer if a >= min_area]
     if not big:
         raise ValueError(
             f"the {what} holds no object of at least min_area = {min_area:g} px^2 (largest: "
-            f"{outer[0][0]:.1f} px^2); lower min_area if the objects are really that small"
+            f"{outer[0][0]:.1f} px^2); {_hint('min_area')}"
         )
     # variance of the blur that moved the level set, and the arc-length scale on which
     # curvature is measured
@@ -475,8 +668,7 @@ def _outlines_from_field(F, *, min_area, smooth, border, what="mask", names=None
             msg = (
                 f"{what}: object {k} ({_describe(p, a)}) touches the image border ({', '.join(sides)}): "
                 "part of it may lie outside the image, so its outline is not the object's "
-                "silhouette. Refused; reframe so that the whole object is visible, or pass "
-                "border='cut' to keep the cut outline"
+                f"silhouette. Refused; reframe so that the whole object is visible{_hint('cut')}"
             )
             if border == "raise":
                 raise ValueError(msg)
@@ -489,7 +681,7 @@ def _outlines_from_field(F, *, min_area, smooth, border, what="mask", names=None
     if not out:
         raise ValueError(
             f"every object in the {what} ({len(refused)}) touches the image border and was "
-            "refused (see the warnings); reframe, or pass border='cut'"
+            f"refused (see the warnings); {_hint('cut_all')}"
         )
     return out
 
@@ -507,14 +699,19 @@ def outlines_from_mask(
     Parameters
     ----------
     mask : (H, W) array
-        * bool, or integer 0/1 or 0/255: a binary mask (object = True/1/255);
-        * uint8 with values up to 255: an 8-bit soft mask (alpha 255 = object);
+        * bool, or integer 0/1 or 0/255 (16-bit: 0/65535): a binary mask (object =
+          True/1/255/65535);
+        * uint8 with values up to 255: an 8-bit soft mask (alpha 255 = object); uint16
+          up to 65535: a 16-bit one;
         * float in [0, 1]: a soft mask, e.g. the fraction of each pixel covered by the
           object (anti-aliased render, alpha matte);
         * any other integer array is a label image: pass ``label``.
-    label : scalar, optional
+    label : number, optional
         With a label image, the value of the pixels of the object(s) wanted; the mask is
         ``mask == label``.
+
+    Any size of mask: the objects are traced in windows around them (see the module's
+    "Memory"), so a huge mask costs little more than itself.
     min_area : float
         Objects enclosing less than this many pixels^2 are ignored (specks).
     smooth : float
@@ -549,7 +746,9 @@ def outlines_from_mask(
     ------
     ValueError
         Wrong shape or dtype, values out of range, a label that does not occur, no object
-        (or none of ``min_area``), or every object refused at the border.
+        (or none of ``min_area``), every object refused at the border, an option out of
+        range (``min_area`` >= 0, ``smooth`` 0 to 20, ``label`` one finite number), or an
+        object region above ``MAX_WINDOW_PIXELS``.
     """
     min_area, smooth = _check_options(min_area, smooth, border)
     F = _as_field(mask, label)
@@ -561,9 +760,40 @@ def outlines_from_mask(
 # ----------------------------------------------------------------------------------
 
 
-def _as_bgr(image) -> tuple[np.ndarray, np.ndarray]:
-    """``(uint8 BGR for GrabCut, float64 BGR in 8-bit units)`` (both (H, W, 3)) from
-    uint8, uint16 or float (in [0, 1]) colour or grey images."""
+class _Image:
+    """A validated photograph: ``u8`` (H, W, 3) uint8 BGR for GrabCut (the caller's
+    own array when it is contiguous uint8 BGR, else converted a block of rows at a
+    time) and :meth:`f64`, float64 BGR in 8-bit units, converted only on the windows
+    asked for (elementwise: a window's values are the whole image's)."""
+
+    def __init__(self, im: np.ndarray):
+        self.im, self.shape = im, im.shape[:2]
+        if im.dtype == np.uint8 and im.shape[2] >= 3:
+            self.u8 = np.ascontiguousarray(im[:, :, :3])
+        else:
+            self.u8 = np.empty(im.shape[:2] + (3,), np.uint8)
+            for i0, i1 in _row_blocks(*self.shape):
+                self.u8[i0:i1] = np.clip(np.round(self._f(im[i0:i1])), 0, 255).astype(np.uint8)
+
+    def _f(self, a: np.ndarray) -> np.ndarray:
+        if a.dtype == np.uint8:
+            f = a.astype(np.float64)
+        elif a.dtype == np.uint16:
+            f = a.astype(np.float64) / 257.0
+        else:
+            f = np.clip(a.astype(np.float64), 0.0, 1.0) * 255.0
+        if f.shape[2] == 1:
+            f = np.repeat(f, 3, axis=2)
+        elif f.shape[2] == 4:
+            f = f[:, :, :3]
+        return np.ascontiguousarray(f)
+
+    def f64(self, y0: int, y1: int, x0: int, x1: int) -> np.ndarray:
+        return self._f(self.im[y0:y1, x0:x1])
+
+
+def _as_bgr(image) -> _Image:
+    """The photograph checked (uint8, uint16 or float in [0, 1]; colour, BGRA or grey)."""
     if isinstance(image, (str, bytes)) or image is None:
         raise ValueError(
             f"image must be an array (H, W, 3), got {type(image).__name__}; read the file "
@@ -579,21 +809,11 @@ def _as_bgr(image) -> tuple[np.ndarray, np.ndarray]:
         )
     if im.shape[0] < 16 or im.shape[1] < 16:
         raise ValueError(f"image is too small ({im.shape[1]}x{im.shape[0]} px): need at least 16x16")
-    if im.dtype == np.uint8:
-        f = im.astype(np.float64)
-    elif im.dtype == np.uint16:
-        f = im.astype(np.float64) / 257.0
-    elif np.issubdtype(im.dtype, np.floating):
-        f = _unit_range(im, "image", "", "Convert 8-bit data to uint8, or divide by 255", 1e-6) * 255.0
-    else:
+    if np.issubdtype(im.dtype, np.floating):
+        _check_unit_range(im, "image", "", "Convert 8-bit data to uint8, or divide by 255", 1e-6)
+    elif im.dtype not in (np.uint8, np.uint16):
         raise ValueError(f"image dtype must be uint8, uint16 or float, got {im.dtype}")
-    if f.shape[2] == 1:
-        f = np.repeat(f, 3, axis=2)
-    elif f.shape[2] == 4:
-        f = f[:, :, :3]
-    f = np.ascontiguousarray(f)
-    u8 = im[:, :, :3] if im.dtype == np.uint8 and im.shape[2] >= 3 else np.clip(np.round(f), 0, 255).astype(np.uint8)
-    return np.ascontiguousarray(u8), f
+    return _Image(im)
 
 
 def _check_boxes(boxes, shape) -> list[tuple[int, int, int, int]]:
@@ -762,15 +982,17 @@ def _crop_box(box, shape, margin_frac=0.15, margin_min=12):
 
 def _segment_box(img, box, k, *, iterations, min_area, init=None):
     """GrabCut of the object in ``box``: ``(crop window, foreground in it)``, or None with a
-    warning when nothing usable is found or the box cuts the object."""
+    warning when nothing usable is found or the box cuts the object.  ``init``: GrabCut's
+    initial labels on the crop window ``_crop_box(box)`` (None: from the box)."""
     H, W = img.shape[:2]
     cx0, cy0, cx1, cy1 = _crop_box(box, (H, W))
+    _check_window((cy0, cy1, cx0, cx1), "image")
     crop = np.ascontiguousarray(img[cy0:cy1, cx0:cx1])
     if init is None:
         rect = (box[0] - cx0, box[1] - cy0, box[2] - box[0] + 1, box[3] - box[1] + 1)
         fg = _grabcut(crop, None, rect, iterations)
     else:
-        fg = _grabcut(crop, np.ascontiguousarray(init[cy0:cy1, cx0:cx1]), None, iterations)
+        fg = _grabcut(crop, np.ascontiguousarray(init), None, iterations)
     fg = _largest_component(fg)
     if fg.sum() < max(min_area, 1.0):
         warnings.warn(
@@ -800,18 +1022,18 @@ def _segment_box(img, box, k, *, iterations, min_area, init=None):
     return (cx0, cy0, cx1, cy1), fg
 
 
-def _finish(imgf, box, k, window, fg, *, inner, min_area, smooth, border):
+def _finish(src: _Image, box, k, window, fg, *, inner, min_area, smooth, border):
     """Outline (pixels, whole-image coordinates) of a segmented object, or None with a
     warning; ``inner`` is the unmixing band (None: no refinement, the binary mask)."""
-    H, W = imgf.shape[:2]
+    H, W = src.shape
     cx0, cy0, cx1, cy1 = window
-    alpha = fg.astype(np.float64) if inner is None else _soft_alpha(imgf[cy0:cy1, cx0:cx1], fg, inner=inner)
+    alpha = fg.astype(np.float64) if inner is None else _soft_alpha(src.f64(cy0, cy1, cx0, cx1), fg, inner=inner)
     # the crop is only a window: pad it with background where it is not at the image border
     pad = ((3 if cy0 > 0 else 0, 3 if cy1 < H else 0), (3 if cx0 > 0 else 0, 3 if cx1 < W else 0))
     big = np.pad(alpha, pad, mode="constant")
     try:
-        outs = _outlines_from_field(big, min_area=min_area, smooth=smooth,
-                                    border="cut" if border == "cut" else "raise", what="segmentation")
+        outs = _outlines_from_field(big, min_area=min_area, smooth=smooth, border="cut" if border == "cut" else "raise",
+                                    what="segmentation", crop=False)
     except ValueError as err:
         if border == "raise":
             raise ValueError(f"box {k} {tuple(box)}: {err}") from None
@@ -829,6 +1051,28 @@ def _dilate(m: np.ndarray, r: int) -> np.ndarray:
 def _erode(m: np.ndarray, r: int) -> np.ndarray:
     k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
     return cv2.erode(m.astype(np.uint8), k).astype(bool)
+
+
+def _auto_init(comp: np.ndarray, shape, window, r: int) -> np.ndarray:
+    """GrabCut's initial labels on ``window`` (x0, y0, x1, y1) of the ``shape`` (H, W)
+    image from ``comp``, a region found on the image reduced to ``comp.shape``: the
+    region upsampled (nearest neighbour, the pixels ``cv2.resize`` picks) is probable
+    foreground, ``2 r`` px around it probable background, ``2 r`` px inside it sure
+    foreground, the rest sure background.  Computed on the window grown by ``2 r + 1``
+    px only: the morphology sees there what it sees on the whole image."""
+    H, W = shape
+    h, w = comp.shape
+    cx0, cy0, cx1, cy1 = window
+    e = 2 * r + 1
+    ex0, ey0, ex1, ey1 = max(0, cx0 - e), max(0, cy0 - e), min(W, cx1 + e), min(H, cy1 + e)
+    ys = np.minimum(np.floor(np.arange(ey0, ey1) * (1.0 / (H / h))).astype(np.intp), h - 1)
+    xs = np.minimum(np.floor(np.arange(ex0, ex1) * (1.0 / (W / w))).astype(np.intp), w - 1)
+    m = comp[ys[:, None], xs[None, :]].astype(bool)
+    init = np.full(m.shape, cv2.GC_BGD, np.uint8)
+    init[_dilate(m, 2 * r)] = cv2.GC_PR_BGD
+    init[m] = cv2.GC_PR_FGD
+    init[_erode(m, 2 * r)] = cv2.GC_FGD
+    return init[cy0 - ey0:cy1 - ey0, cx0 - ex0:cx1 - ex0]
 
 
 def _auto_candidates(img: np.ndarray, *, iterations: int, min_area: float, max_side: int = 640):
@@ -866,14 +1110,14 @@ def _auto_candidates(img: np.ndarray, *, iterations: int, min_area: float, max_s
     return cands, s, notes
 
 
-def _finish_all(imgf, segs, *, refine, min_area, smooth, border) -> list[np.ndarray]:
+def _finish_all(src: _Image, segs, *, refine, min_area, smooth, border) -> list[np.ndarray]:
     """Outlines of the segmented objects of one image, with one unmixing band for all."""
     inner = None
     if refine and segs:
-        inner = _inner_band([_edge_sharpness(imgf[w[1]:w[3], w[0]:w[2]], fg) for _, _, w, fg in segs])
+        inner = _inner_band([_edge_sharpness(src.f64(w[1], w[3], w[0], w[2]), fg) for _, _, w, fg in segs])
     out = []
     for k, b, w, fg in segs:
-        p = _finish(imgf, b, k, w, fg, inner=inner, min_area=min_area, smooth=smooth, border=border)
+        p = _finish(src, b, k, w, fg, inner=inner, min_area=min_area, smooth=smooth, border=border)
         if p is not None:
             out.append(p)
     return out
@@ -938,9 +1182,10 @@ def outlines_from_image(
         Bad image or boxes, or no object found at all.
     """
     min_area, smooth = _check_options(min_area, smooth, border)
-    if not (isinstance(iterations, (int, np.integer)) and 1 <= int(iterations) <= 50):
-        raise ValueError(f"iterations must be an int between 1 and 50, got {iterations!r}")
-    img, imgf = _as_bgr(image)
+    iterations = integer(iterations, "iterations", lo=1, hi=50, what="GrabCut iterations")
+    refine = boolean(refine, "refine")
+    src = _as_bgr(image)
+    img = src.u8
     H, W = img.shape[:2]
     cv2.setRNGSeed(0)  # GrabCut's k-means draws from OpenCV's RNG: same image, same outlines
     segs = []  # (index, box, window, foreground)
@@ -950,7 +1195,7 @@ def outlines_from_image(
             sg = _segment_box(img, b, k, iterations=int(iterations), min_area=min_area)
             if sg is not None:
                 segs.append((k, b) + sg)
-        out = _finish_all(imgf, segs, refine=refine, min_area=min_area, smooth=smooth, border=border)
+        out = _finish_all(src, segs, refine=refine, min_area=min_area, smooth=smooth, border=border)
         if not out:
             raise ValueError(
                 f"no object outline could be extracted from any of the {len(bxs)} boxes (see the "
@@ -965,29 +1210,18 @@ def outlines_from_image(
             "no object found in the image: automatic detection (GrabCut from the image minus a "
             "border band) found no solid foreground region clear of the border"
             + (f" ({len(notes)} region(s) ignored, see the warnings)" if notes else "")
-            + ". Pass boxes=[(x0, y0, x1, y1), ...] around the objects, or a mask to "
-            "outlines_from_mask"
+            + f". {_hint('boxes')[:1].upper()}{_hint('boxes')[1:]}"
         )
     for k, (_, comp, box) in enumerate(cands):
-        m = comp.astype(np.uint8)
-        if s != 1.0:
-            m = cv2.resize(m, (W, H), interpolation=cv2.INTER_NEAREST)
-        m = m.astype(bool)
         r = max(2, int(round(2.0 / s)))
-        init = np.full((H, W), cv2.GC_BGD, np.uint8)
-        init[_dilate(m, 2 * r)] = cv2.GC_PR_BGD
-        init[m] = cv2.GC_PR_FGD
-        init[_erode(m, 2 * r)] = cv2.GC_FGD
         ib = (max(0, int(box[0]) - 2 * r), max(0, int(box[1]) - 2 * r),
               min(W - 1, int(math.ceil(box[2])) + 2 * r), min(H - 1, int(math.ceil(box[3])) + 2 * r))
+        init = _auto_init(comp, (H, W), _crop_box(ib, (H, W)), r)
         sg = _segment_box(img, ib, k, iterations=int(iterations), min_area=min_area, init=init)
         if sg is not None:
             segs.append((k, ib) + sg)
-    out = _finish_all(imgf, segs, refine=refine, min_area=min_area, smooth=smooth, border=border)
+    out = _finish_all(src, segs, refine=refine, min_area=min_area, smooth=smooth, border=border)
     if not out:
-        raise ValueError(
-            "no object outline could be extracted (see the warnings); pass boxes around the "
-            "objects, or a mask to outlines_from_mask"
-        )
+        raise ValueError(f"no object outline could be extracted (see the warnings); {_hint('boxes')}")
     order = np.argsort([-_shoelace(p) for p in out], kind="stable")
     return [out[i] for i in order]
