@@ -13,7 +13,8 @@ the same whatever pixel frame ``K`` is expressed in.
 
 The inverse (undistortion) solves ``s g(s^2 q_d) = 1`` for the scale ``s = |m| / |m_d|``
 (``q_d = |m_d|^2``, no square root: smooth at the principal point) by
-:data:`NEWTON_STEPS` Newton steps from ``s = 1``; then ``m = s m_d``.  For barrel
+:data:`NEWTON_STEPS` Newton steps from ``s = 1`` (slope floored at
+:data:`SLOPE_FLOOR`: finite everywhere); then ``m = s m_d``.  For barrel
 distortion (``k1 < 0, k2 = 0``) the function is concave and increasing in ``s`` and the
 steps approach the root monotonically from below; for pincushion (``k1 > 0``) convex,
 from above.  The model is one-to-one only while the radial map ``rho -> rho g(rho^2)``
@@ -33,6 +34,10 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 NEWTON_STEPS = 8  # from s = 1: converged to rounding within 0.9 of the monotone radius (tests)
+# The Newton steps divide by the radial map's slope, floored here: beyond the monotone
+# radius (no inverse) the result stays finite instead of NaN; within 0.97 of it the
+# slope at every iterate is above the floor, so nothing changes there.
+SLOPE_FLOOR = 0.05
 
 
 def _radial(q, k):
@@ -79,7 +84,7 @@ def undistort_normalised(m_d: Float[Array, "... 2"], k: Float[Array, " n"]) -> F
     s = jnp.ones_like(qd)
     for _ in range(NEWTON_STEPS):  # unrolled: a few scalar operations per point
         q = s * s * qd
-        s = s - (s * _radial(q, k) - 1.0) / _radial_slope(q, k)
+        s = s - (s * _radial(q, k) - 1.0) / jnp.maximum(_radial_slope(q, k), SLOPE_FLOOR)
     return m_d * s[..., None]
 
 

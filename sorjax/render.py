@@ -28,6 +28,14 @@ Conventions
   axis.  Objects are drawn far to near; a nearer object hides what it covers of the
   ones behind (their coverage is reduced accordingly and they are marked occluded).
   No shadows.
+* Lens distortion (``distortion=(k1, k2)``, default None: a pinhole camera, the same
+  images as without the argument): OpenCV's radial model
+  (:mod:`sorjax._distortion`).  Each object's outline is its pinhole silhouette mapped
+  exactly through the distortion (:func:`sorjax.scenes.distort_outline`), so the
+  coverages stay exact; the table, the wall and the objects' shading are sampled at
+  each pixel's undistorted position (the inverse map, Newton steps), i.e. the distorted
+  image is rendered directly, not resampled.  Pixels beyond where the model is
+  one-to-one (far corners with strong barrel distortion) show a smooth continuation.
 
 Everything random takes a seed; the same arguments give the same image.
 """
@@ -150,6 +158,8 @@ class Rendering:
         most visible one where several do), 0 elsewhere.
     seed : int or None
     description : str
+    distortion : (k1, k2) or None
+        The camera's radial distortion (None: a pinhole camera).
     """
 
     image: np.ndarray
@@ -159,6 +169,7 @@ class Rendering:
     labels: np.ndarray
     seed: int | None
     description: str
+    distortion: tuple[float, float] | None = None
 
     @property
     def outlines(self) -> list[np.ndarray]:
@@ -272,12 +283,26 @@ def _coverage_in_box(polygon, shape, supersample, margin=2):
 # ----------------------------------------------------------------------------------
 
 
-def _background(K, Rc, tc, shape, rng, table_colour, wall_colour):
-    """Table (wood grain, perspective-correct) below the horizon, wall above; float BGR."""
+def _pixel_grid(K, shape, k):
+    """``(xs, ys)`` (H, W): the pinhole (undistorted) position of every pixel centre
+    for the radial distortion ``k`` (None: the pixel centres themselves)."""
+    H, W = shape
+    xs, ys = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
+    if k is None:
+        return xs, ys
+    from ._distortion import undistort
+
+    u = np.asarray(undistort(np.stack([xs, ys], axis=-1), K, k))
+    return u[..., 0], u[..., 1]
+
+
+def _background(K, Rc, tc, shape, rng, table_colour, wall_colour, grid=None):
+    """Table (wood grain, perspective-correct) below the horizon, wall above; float BGR.
+    ``grid``: the (pinhole) positions of the pixels, :func:`_pixel_grid`."""
     H, W = shape
     Ki = np.linalg.inv(K)
     C = -Rc.T @ tc
-    xs, ys = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
+    xs, ys = _pixel_grid(K, shape, None) if grid is None else grid
     d = np.stack([xs, ys, np.ones_like(xs)], axis=-1) @ (Rc.T @ Ki).T  # world ray directions
     dn = d / np.linalg.norm(d, axis=-1, keepdims=True)
     img = np.empty((H, W, 3))
@@ -310,15 +335,20 @@ def _background(K, Rc, tc, shape, rng, table_colour, wall_colour):
     return img
 
 
-def _object_colour_field(truth, base, box, light_angle):
-    """Shaded colour (float BGR, 0-255) of an object on the pixels of ``box`` (inclusive)."""
+def _object_colour_field(truth, base, box, light_angle, grid=None):
+    """Shaded colour (float BGR, 0-255) of an object on the pixels of ``box`` (inclusive);
+    with distortion (``grid``: the pinhole positions of the pixels) shaded in the
+    pinhole image, about its outline and axis."""
     x0, y0, x1, y1 = box
     l = truth.l_s
-    o = truth.outline
+    o = truth.outline if truth.outline_pinhole is None else truth.outline_pinhole
     dirv = np.array([l[1], -l[0]])  # along the image of the axis
     sd = o @ l[:2] + l[2]  # signed distance of outline points from the axis image
     ss = o @ dirv
-    xs, ys = np.meshgrid(np.arange(x0, x1 + 1, dtype=np.float64), np.arange(y0, y1 + 1, dtype=np.float64))
+    if grid is None:
+        xs, ys = np.meshgrid(np.arange(x0, x1 + 1, dtype=np.float64), np.arange(y0, y1 + 1, dtype=np.float64))
+    else:
+        xs, ys = grid[0][y0 : y1 + 1, x0 : x1 + 1], grid[1][y0 : y1 + 1, x0 : x1 + 1]
     pd = xs * l[0] + ys * l[1] + l[2]
     ps = xs * dirv[0] + ys * dirv[1]
     # half-widths of the outline on each side of the axis image, per 1-px slice along it
@@ -401,6 +431,7 @@ def render(
     table_colour=(70, 105, 150),
     wall_colour=(200, 205, 210),
     description: str | None = None,
+    distortion: Sequence[float] | None = None,
 ) -> Rendering:
     """Render solids of revolution on a table seen by ``K [R | t]``.
 
@@ -427,6 +458,8 @@ def render(
         Spacing (pixels) of the exact outlines.
     table_colour, wall_colour : (b, g, r)
         Base colours, 0-255.
+    distortion : (k1, k2) or None
+        OpenCV radial lens distortion (module docstring); None: a pinhole camera.
 
     Returns
     -------
@@ -445,6 +478,7 @@ def render(
     noise, blur = float(noise), float(blur)
     if not (math.isfinite(noise) and noise >= 0 and math.isfinite(blur) and blur >= 0):
         raise ValueError("noise (grey levels) and blur (pixels) must be finite and >= 0")
+    kd = _sc._check_distortion(distortion)
     items = []
     for k, obj in enumerate(objects):
         if not isinstance(obj, TableObject):
@@ -452,21 +486,30 @@ def render(
         prof = _as_profile(obj.profile)
         Rwo, two = _object_pose(obj, prof)
         R, t = Rc @ Rwo, Rc @ two + tc
-        sil = _sc.sor_silhouette(prof, K, R, t, spacing=spacing)
-        _sc._check_in_image(sil.points, (w, h), f"object {k} ({prof.name})")
-        items.append((obj, prof, R, t, sil.points))
+        what = f"object {k} ({prof.name})"
+        pts, pin = _silhouette(prof, K, R, t, spacing, kd, what)
+        _sc._check_in_image(pts, (w, h), what)
+        items.append((obj, prof, R, t, pts, pin))
     return _render_placed(K, Rc, tc, items, w, h, seed, noise, blur, supersample, table_colour,
-                          wall_colour, description)
+                          wall_colour, description, kd)
+
+
+def _silhouette(prof, K, R, t, spacing, kd, what):
+    """``(outline, pinhole outline or None)`` of an object: its exact silhouette,
+    distorted by ``kd`` (None: none)."""
+    return _sc._traced_distorted(lambda sp: _sc.sor_silhouette(prof, K, R, t, spacing=sp).points, K, kd, spacing,
+                                 what)
 
 
 def _render_placed(K, Rc, tc, items, w, h, seed, noise, blur, supersample, table_colour, wall_colour,
-                   description):
+                   description, kd=None):
     rng = np.random.default_rng(int(seed))
-    img = _background(K, Rc, tc, (h, w), rng, table_colour, wall_colour)
+    grid = None if kd is None else _pixel_grid(K, (h, w), kd)
+    img = _background(K, Rc, tc, (h, w), rng, table_colour, wall_colour, grid)
     light = rng.uniform(-0.9, 0.9)
     placed = []
-    for k, (obj, prof, R, t, points) in enumerate(items):
-        truth = _sc.view_truth(K, R, t, points)
+    for k, (obj, prof, R, t, points, pin) in enumerate(items):
+        truth = _sc.view_truth(K, R, t, points, outline_pinhole=pin)
         centre = R @ np.array([0.0, 0.5 * (prof.y0 + prof.y1), 0.0]) + t
         colour = obj.colour if obj.colour is not None else PALETTE[int(rng.integers(len(PALETTE)))]
         placed.append((k, prof, R, t, truth, float(centre[2]), colour))
@@ -481,7 +524,7 @@ def _render_placed(K, Rc, tc, items, w, h, seed, noise, blur, supersample, table
         box = (max(0, int(math.floor(o[:, 0].min())) - 1), max(0, int(math.floor(o[:, 1].min())) - 1),
                min(w - 1, int(math.ceil(o[:, 0].max())) + 1), min(h - 1, int(math.ceil(o[:, 1].max())) + 1))
         x0, y0, x1, y1 = box
-        col = _object_colour_field(truth, colour, box, light)
+        col = _object_colour_field(truth, colour, box, light, grid)
         a = cov[y0 : y1 + 1, x0 : x1 + 1, None]
         img[y0 : y1 + 1, x0 : x1 + 1] = a * col + (1.0 - a) * img[y0 : y1 + 1, x0 : x1 + 1]
         for j in range(len(placed)):  # hide what it covers of the objects behind it
@@ -513,9 +556,9 @@ def _render_placed(K, Rc, tc, items, w, h, seed, noise, blur, supersample, table
         description = (
             f"{len(rendered)} object(s) ({', '.join(r.name for r in rendered)}) on a table, "
             f"{w}x{h} px, K = {np.round(K, 2).tolist()}, noise {noise:g}, blur {blur:g}, seed {seed}"
-        )
+        ) + _sc._distortion_note(kd)
     return Rendering(image=image, K=K, camera=(Rc, tc), objects=tuple(rendered), labels=labels,
-                     seed=int(seed), description=description)
+                     seed=int(seed), description=description, distortion=_sc._as_pair(kd))
 
 
 def _rough_extent(prof, K, R, t):
@@ -559,6 +602,7 @@ def random_table_scene(
     blur: float = 0.0,
     supersample: int = 32,
     max_tries: int = 100,
+    distortion: Sequence[float] | None = None,
 ) -> Rendering:
     """A random table scene, deterministic given ``seed``.
 
@@ -573,6 +617,8 @@ def random_table_scene(
       lies on its side with probability ``lying`` (any yaw); all wholly inside the image
       at least ``margin_px`` from its border, their bounding boxes at least ``gap_px``
       apart (no occlusion).
+    * ``distortion``: ``(k1, k2)`` radial lens distortion (module docstring; None:
+      none); the layout checks apply to the distorted outlines.
 
     Raises RuntimeError when no such layout is found in ``max_tries`` draws.
     """
@@ -581,6 +627,7 @@ def random_table_scene(
     if not (isinstance(n_objects, (int, np.integer)) and 1 <= n_objects <= 8):
         raise ValueError(f"n_objects must be an int from 1 to 8, got {n_objects!r}")
     w, h = _check_image_size(image_size)
+    kd = _sc._check_distortion(distortion)
     rng = np.random.default_rng(int(seed))
     names = [n for n in _sc.PROFILES if n != "cylinder"] if shapes is None else list(shapes)
     for nm in names:
@@ -631,13 +678,13 @@ def random_table_scene(
                 if lo is None or not _fits(lo, hi, w, h, margin_px - 2, size_px, boxes, gap_px - 2):
                     continue
                 try:
-                    pts = _sc.sor_silhouette(prof, K, R, t).points
+                    pts, pin = _silhouette(prof, K, R, t, 0.3, kd, "random table object")
                 except ValueError:
                     continue
                 lo, hi = pts.min(0), pts.max(0)
                 if not _fits(lo, hi, w, h, margin_px, size_px, boxes, gap_px):
                     continue
-                item = (obj, prof, R, t, pts)
+                item = (obj, prof, R, t, pts, pin)
                 boxes.append((lo, hi))
                 break
             if item is None:
@@ -653,5 +700,5 @@ def random_table_scene(
             f"fv={K[1, 1]:.1f} u0={K[0, 2]:.1f} v0={K[1, 2]:.1f}"
         )
         return _render_placed(K, Rc, tc, items, w, h, int(rng.integers(2**31)), float(noise), float(blur),
-                              supersample, (70, 105, 150), (200, 205, 210), desc)
+                              supersample, (70, 105, 150), (200, 205, 210), desc, kd)
     raise RuntimeError(f"random_table_scene(seed={seed}): no valid layout in {max_tries} tries")

@@ -228,3 +228,26 @@ def test_camera_yaml_without_distortion_writes_zeros(tmp_path):
     assert doc["distortion"] is None and doc["distortion_std"] is None
     _, js1 = write_camera(_cal([-0.1]), tmp_path / "one.yaml", (640, 480))
     assert json.loads(js1.read_text())["distortion_std"] == {"k1": None, "k2": 0.0}
+
+
+# ------------------------------------------------------------- renders with distortion
+
+
+def test_render_with_distortion_undistorts_to_the_pinhole_render():
+    from sorjax import render
+
+    k = (-0.2, 0.0)
+    pin = render.random_table_scene(7, n_objects=1, noise=0.0)
+    dis = render.random_table_scene(7, n_objects=1, noise=0.0, distortion=k)
+    assert dis.distortion == k and pin.distortion is None
+    (o,) = dis.objects
+    assert np.allclose(o.R, pin.objects[0].R)  # the same layout
+    back = np.asarray(undistort(o.truth.outline, dis.K, np.asarray(k)))
+    assert np.max(np.abs(back - o.truth.outline_pinhole)) < 1e-10
+    dist = opencv_coefficients(k)
+    cov = cv2.undistort(o.coverage.astype(np.float32), dis.K, dist)
+    inner = (slice(30, -30), slice(30, -30))
+    assert np.mean(np.abs(cov - pin.objects[0].coverage)[inner]) < 2e-3
+    img = cv2.undistort(dis.image, dis.K, dist).astype(float)
+    assert np.mean(np.abs(img - pin.image)[inner]) < 0.5  # grey levels: resampling only
+    assert np.mean(np.abs(dis.image.astype(float) - pin.image)[inner]) > 1.0
