@@ -84,9 +84,10 @@ def check_output(path, *, inputs=(), inside=None, what: str = "output") -> Path:
 
 def safe_name(name: str, default: str = "run") -> str:
     """``name`` as one plain file or folder name: every character other than a letter,
-    a digit, ``.``, ``_`` or ``-`` replaced by ``_`` and leading dots dropped (no
-    ``..``, no hidden name); ``default`` when nothing is left."""
-    s = re.sub(r"[^A-Za-z0-9._-]", "_", str(name)).lstrip(".")
+    a digit, ``.``, ``_`` or ``-`` replaced by ``_``, then leading dots and
+    underscores dropped (no ``..``, no hidden name: ``"../../x"`` gives ``"x"``);
+    ``default`` when nothing is left."""
+    s = re.sub(r"[^A-Za-z0-9._-]", "_", str(name)).lstrip("._")
     return s if s.strip("_") else default
 
 

@@ -7,11 +7,17 @@ outline per file: ``.npy``, or text with two columns ``x y`` in pixels), calibra
 prints K with its standard deviations and a per-view table, and with ``--out`` writes
 an OpenCV YAML, a JSON twin and overlay images.  Errors in the input are reported in one line with
 exit code 2, never a traceback.
+
+Outputs are safe: every file to write is checked before any work (its folder exists
+or can be created and is writable, it is not one of the inputs), each is written to a
+temporary file beside it and renamed when complete, and an experiment's run
+directory stays inside ``--out``.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -48,6 +54,9 @@ def _read_image(path: str, flags) -> np.ndarray:
 
 
 def _read_boxes(path: str | None, images: list[str]) -> list:
+    """One entry per image (None: automatic detection) from the ``--boxes`` JSON: a
+    list (one entry per image) or ``{image file name (or path as given): boxes}``.
+    A key that names no image, or a file name shared by several images, is an error."""
     if path is None:
         return [None] * len(images)
     import json
@@ -59,39 +68,176 @@ def _read_boxes(path: str | None, images: list[str]) -> list:
         data = json.loads(p.read_text())
     except json.JSONDecodeError as e:
         raise ValueError(f"{path}: not valid JSON ({e})") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ValueError(f"{path}: could not be read ({e})") from None
     if isinstance(data, list):
         if len(data) != len(images):
             raise ValueError(f"{path}: a list of boxes needs one entry per image ({len(images)}), got {len(data)}")
         return data
-    if isinstance(data, dict):
-        return [data.get(Path(f).name, data.get(f)) for f in images]
-    raise ValueError(f"{path}: expected {{image file name: [[x0, y0, x1, y1], ...]}} or one list per image")
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected {{image file name: [[x0, y0, x1, y1], ...]}} or one list per image")
+    as_given = [os.path.normpath(f) for f in images]
+    names = [Path(f).name for f in images]
+    out = [None] * len(images)
+    unmatched = []
+    for key, boxes in data.items():
+        hits = [i for i, g in enumerate(as_given) if g == os.path.normpath(key)]
+        if not hits:
+            hits = [i for i, n in enumerate(names) if n == key]
+            if len({as_given[i] for i in hits}) > 1:
+                raise ValueError(f"{path}: the key {key!r} names {len(hits)} different images "
+                                 f"({', '.join(images[i] for i in hits)}); key them by their paths as given")
+        if not hits:
+            unmatched.append(key)
+        for i in hits:
+            out[i] = boxes
+    if unmatched:
+        shown = ", ".join(map(repr, unmatched[:5])) + (" ..." if len(unmatched) > 5 else "")
+        raise ValueError(f"{path}: {len(unmatched)} key(s) name no image given: {shown}; the keys must be the "
+                         f"images' file names ({', '.join(sorted(set(names))[:5])}) or their paths as given")
+    return out
+
+
+def _chunks(n: int, width: int):
+    step = max(1, (1 << 22) // max(width, 1))
+    for i in range(0, n, step):
+        yield i, min(n, i + step)
+
+
+def _mask_channel(mask: np.ndarray) -> np.ndarray:
+    """One channel of a colour mask file: the alpha of an RGBA mask when it varies (a
+    cut-out), else the colour channels: one when they are equal, their maximum when not."""
+    if mask.shape[2] == 4:
+        alpha = mask[:, :, 3]
+        if alpha.min() != alpha.max():
+            return alpha
+        mask = mask[:, :, :3]  # opaque (alpha constant): the colour is the mask
+    H, W = mask.shape[:2]
+    if all(np.all(mask[i0:i1] == mask[i0:i1, :, :1]) for i0, i1 in _chunks(H, W)):
+        return mask[:, :, 0]
+    out = np.empty((H, W), mask.dtype)
+    for i0, i1 in _chunks(H, W):
+        out[i0:i1] = mask[i0:i1].max(axis=2)
+    return out
+
+
+def _value_counts(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct values of ``mask`` and their pixel counts, a block of rows at a time."""
+    H, W = mask.shape
+    if mask.dtype in (np.uint8, np.uint16):
+        counts = np.zeros(1 << (8 * mask.dtype.itemsize), np.int64)
+        for i0, i1 in _chunks(H, W):
+            counts += np.bincount(mask[i0:i1].ravel(), minlength=len(counts))
+        vals = np.flatnonzero(counts)
+        return vals.astype(mask.dtype), counts[vals]
+    tally: dict = {}
+    for i0, i1 in _chunks(H, W):
+        v, c = np.unique(mask[i0:i1], return_counts=True)
+        for x, n in zip(v.tolist(), c.tolist()):
+            tally[x] = tally.get(x, 0) + n
+    vals = np.array(sorted(tally), dtype=mask.dtype)
+    return vals, np.array([tally[x] for x in vals.tolist()], np.int64)
 
 
 def _mask_outlines(mask: np.ndarray, name: str) -> list[np.ndarray]:
-    """Outlines of a mask file: binary/soft masks directly; a label image (more than
-    two values) gives one set of outlines per non-zero label."""
+    """Outlines of a mask file, whatever it holds:
+
+    * two values (0/255, 0/1, 0/65535, any two levels): a binary mask, the higher value
+      the object;
+    * 8- or 16-bit with 0 and full scale (255, 65535) and values between on fewer pixels
+      than full scale (anti-aliased or quantised edges, e.g. 0/128/255): a soft mask;
+    * float in [0, 1]: a soft mask;
+    * any other integer mask: a label image, one set of outlines per positive label.
+
+    A colour file gives one channel first (:func:`_mask_channel`)."""
     import sorjax
 
     if mask.ndim == 3:
-        mask = mask[..., 0] if np.all(mask == mask[..., :1]) else mask.max(axis=2)
-    vals = np.unique(mask)
-    if mask.dtype.kind in "iu" and len(vals) > 2 and not (mask.dtype == np.uint8 and vals.min() == 0 and vals.max() == 255
-                                                          and len(vals) > 16):
-        out = []
-        for v in vals[vals != 0]:
+        mask = _mask_channel(mask)
+    vals, counts = _value_counts(mask)
+    if len(vals) == 1:
+        raise ValueError(f"{name}: the mask is constant (every pixel {vals[0]}): no object marked")
+    if len(vals) == 2:
+        return sorjax.outlines_from_mask(mask, label=vals[1])
+    full = {np.dtype(np.uint8): 255, np.dtype(np.uint16): 65535}.get(mask.dtype)
+    if mask.dtype.kind == "f":
+        if vals[0] >= 0 and vals[-1] <= 1:
+            return sorjax.outlines_from_mask(mask)
+        raise ValueError(f"{name}: a float mask must hold values in [0, 1] (or two levels); got values in "
+                         f"[{vals[0]:g}, {vals[-1]:g}]")
+    if full is not None and vals[0] == 0 and vals[-1] == full and counts[1:-1].sum() < counts[-1]:
+        return sorjax.outlines_from_mask(mask)  # soft: edges between 0 and full scale
+    out = []
+    labels = vals[vals > 0]
+    for v in labels:
+        try:
             out.extend(sorjax.outlines_from_mask(mask, label=v))
-        if not out:
-            raise ValueError(f"{name}: no object in this label image")
-        return out
-    return sorjax.outlines_from_mask(mask)
+        except ValueError as e:
+            warnings.warn(f"label {v}: {e}; left out", stacklevel=2)
+    if not out:
+        raise ValueError(f"{name}: read as a label image ({len(labels)} positive labels), and no label gave an object "
+                         "outline (see the warnings)")
+    return out
 
 
-def _views_from_images(args):
-    """(outlines, sources, images, size) from the image files (and masks/boxes)."""
+def _labels(files: list[str]) -> list[str]:
+    """How each input file is named in the table, the JSON twin and the overlay names:
+    its file name, or its path as given where file names repeat (a/img.png, b/img.png),
+    plus ``@k`` (its position) where even that repeats."""
+    names = [Path(f).name for f in files]
+    out = [n if names.count(n) == 1 else os.path.normpath(f) for n, f in zip(names, files)]
+    return [lab if out.count(lab) == 1 else f"{lab}@{k}" for k, lab in enumerate(out)]
+
+
+def _overlay_paths(yml: Path, files: list[str]) -> list[Path]:
+    """One overlay PNG per image beside the camera file: ``<camera>_overlay_<image
+    stem>.png``, the stem being the image's path as given (made a plain file name)
+    where stems repeat (a/img.png, b/img.png), and ``_2``, ``_3`` added where even
+    that repeats: never two images on one file."""
+    from ._files import safe_name
+
+    stems = [Path(f).stem for f in files]
+    out, taken = [], set()
+    for f, stem in zip(files, stems):
+        if stems.count(stem) > 1:
+            stem = os.path.splitext(os.path.normpath(f))[0]
+        base = f"{yml.stem}_overlay_{safe_name(stem, 'image')}"
+        name, k = base, 2
+        while name in taken:
+            name, k = f"{base}_{k}", k + 1
+        taken.add(name)
+        out.append(yml.parent / f"{name}.png")
+    return out
+
+
+def _plan_outputs(args, images: list[str]):
+    """``(camera YAML, JSON twin, overlay PNGs)`` of ``--out``, each checked before any
+    work (:func:`sorjax._files.check_output`): a writable place, none of the inputs."""
+    from ._camera_io import camera_paths
+    from ._files import check_output
+
+    if args.out is None:
+        return None
+    if args.out.endswith(("/", os.sep)) or Path(args.out).is_dir():
+        raise ValueError(f"--out {args.out} is a folder; give the camera file to write, e.g. "
+                         f"{os.path.join(args.out, 'camera.yaml')}")
+    yml, twin = camera_paths(args.out)
+    overlays = _overlay_paths(yml, images) if images else []
+    inputs = [*args.outlines, *(args.masks or []), *([args.boxes] if args.boxes else [])]
+    for path in (yml, twin, *overlays):
+        check_output(path, inputs=inputs, what="--out")
+    return yml, twin, overlays
+
+
+def _views_from_images(args, labels: list[str]):
+    """(outlines, sources, images, size) from the image files (and masks/boxes);
+    ``images``: ``(file, index of its first view, number of views)``.  No image is
+    kept in memory (the overlays read them again)."""
     import cv2
 
     import sorjax
+
+    from ._extract import command_line_hints
 
     if args.masks and len(args.masks) != len(args.outlines):
         raise ValueError(f"--masks needs one mask per image: {len(args.outlines)} images, {len(args.masks)} masks")
@@ -104,36 +250,63 @@ def _views_from_images(args):
             size = (w, h)
         elif size != (w, h):
             raise ValueError(f"{f}: {w}x{h} px, but the first image is {size[0]}x{size[1]}: one camera, one image size")
-        with warnings.catch_warnings(record=True) as caught:
+        with warnings.catch_warnings(record=True) as caught, command_line_hints():
             warnings.simplefilter("always")
             try:
                 if args.masks:
+                    del img  # a mask needs no photograph: one large array at a time
                     mask = _read_image(args.masks[k], cv2.IMREAD_UNCHANGED)
                     if mask.shape[:2] != (h, w):
                         raise ValueError(f"{args.masks[k]}: mask is {mask.shape[1]}x{mask.shape[0]} px but its image "
                                          f"{f} is {w}x{h} px")
                     found = _mask_outlines(mask, args.masks[k])
+                    del mask
                 else:
                     found = sorjax.outlines_from_image(img, boxes=boxes[k])
+                    del img
             except ValueError as e:
                 raise ValueError(f"{f}: {e}") from None
         for wmsg in caught:
-            print(f"warning: {Path(f).name}: {wmsg.message}", file=sys.stderr)
+            print(f"warning: {labels[k]}: {wmsg.message}", file=sys.stderr)
+        images.append((f, len(outlines), len(found)))
         for j, o in enumerate(found):
             outlines.append(o)
-            sources.append(f"{Path(f).name}#{j}")
-        images.append((f, img, len(found)))
+            sources.append(f"{labels[k]}#{j}")
     return outlines, sources, images, size
 
 
-def _nonnegative(text: str) -> float:
-    try:
-        x = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (np.isfinite(x) and x >= 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
-    return x
+def _number_arg(lo: float, lo_open: bool, what: str):
+    """An argparse type: a finite number ``> lo`` (``lo_open``) or ``>= lo``."""
+
+    def parse(text: str) -> float:
+        try:
+            x = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+        if not (np.isfinite(x) and (x > lo if lo_open else x >= lo)):
+            raise argparse.ArgumentTypeError(f"must be a finite number {'>' if lo_open else '>='} {lo:g}"
+                                             f"{f' ({what})' if what else ''}, got {text!r}")
+        return x
+
+    return parse
+
+
+def _int_arg(lo: int, what: str):
+    """An argparse type: an integer ``>= lo``."""
+
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+        if n < lo:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {lo}{f' ({what})' if what else ''}, got {text!r}")
+        return n
+
+    return parse
+
+
+_nonnegative = _number_arg(0.0, False, "")
 
 
 def _calibrate(args) -> int:
@@ -146,11 +319,13 @@ def _calibrate(args) -> int:
         raise ValueError("give either images or outline files (.npy/.txt/.csv), not both")
     if not any(is_image) and (args.masks or args.boxes):
         raise ValueError("--masks and --boxes go with images")
+    labels = _labels(args.outlines)
+    plan = _plan_outputs(args, args.outlines if any(is_image) else [])  # before any work
     if any(is_image):
-        outlines, sources, images, size = _views_from_images(args)
+        outlines, sources, images, size = _views_from_images(args, labels)
     else:
         outlines = [_read_outline(f) for f in args.outlines]
-        sources = [Path(f).name for f in args.outlines]
+        sources = list(labels)
         images, size = [], None
     print(f"{len(outlines)} outline(s) from {len(args.outlines)} file(s)")
     with warnings.catch_warnings(record=True) as caught:
@@ -167,16 +342,15 @@ def _calibrate(args) -> int:
         status = "used" if i in used else f"dropped: {dropped.get(i, 'not used')}"
         r = rms.get(i, float(cal.homologies[i].rms))
         print(f" {i:4d}  {src[:30]:30s}  {r:17.3f}  {status}")
-    if args.out is not None and images:
-        base = Path(args.out)
-        for f, img, n in images:
-            first = sources.index(next(s for s in sources if s.startswith(Path(f).name + "#"))) if n else 0
+    if plan is not None and images:
+        import cv2
+
+        for (f, first, n), png in zip(images, plan[2]):
             views = []
-            for j in range(n):
-                i = first + j
+            for i in range(first, first + n):
                 h = cal.homologies[i]
                 views.append((outlines[i], np.asarray(h.l_s), np.asarray(h.v_x), f"{i}" + ("" if i in used else " (dropped)")))
-            draw_overlay(img, views, base.parent / f"{base.stem}_overlay_{Path(f).stem}.png")
+            draw_overlay(_read_image(f, cv2.IMREAD_COLOR), views, png)
     if not cal.success:
         print(f"calibration failed: {cal.message}", file=sys.stderr)
         if getattr(cal, "details", ""):
@@ -191,11 +365,11 @@ def _calibrate(args) -> int:
     if np.isfinite(cal.perspective_px):
         print(f"perspective shown by the outlines: {cal.perspective_px:.3g} px RMS (z = {cal.perspective_z:.3g}; "
               f"the focal length needs >= {3 * args.outline_error:.3g} px, 3 x --outline-error)")
-    if args.out is not None:
+    if plan is not None:
         if size is None:
             pts = np.concatenate([np.asarray(o).reshape(-1, 2) for o in outlines])
             size = tuple(int(np.ceil(x)) + 1 for x in pts.max(axis=0))
-        yml, js = write_camera(cal, args.out, size, sources)
+        yml, js = write_camera(cal, plan[0], size, sources)
         print(f"wrote {yml} and {js}")
     return 0
 
@@ -216,13 +390,20 @@ def _experiment(args) -> int:
     from .experiment import load_config, run_experiment
     from .experiment._runner import use_cpu_devices
 
+    from .experiment._runner import failure_summary, run_folder
+
     path = _find_config(args.config)
     cfg = load_config(path)
+    run_folder(cfg, args.out, "--out")  # before any trial: the run directory can be written inside --out
     use_cpu_devices(cfg.workers if args.workers is None else args.workers)  # before JAX starts its backend
     res = run_experiment(cfg, out=args.out, trials=args.trials, seed=args.seed, workers=args.workers,
                          progress=not args.quiet, source=path.read_text())
     print((res.path / "table.md").read_text())
     print(f"wrote {res.path}")
+    failed = failure_summary(res.records)
+    if failed:
+        print(f"sorjax: error: {failed}; nothing was estimated (the run directory has the details)", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -233,9 +414,11 @@ def _table1(args) -> int:
 
 def _add_run_args(p):
     p.add_argument("--out", default="runs", help="folder for the run directories (default: runs)")
-    p.add_argument("--trials", type=int, default=None, help="trials per row (overrides the config)")
-    p.add_argument("--seed", type=int, default=None, help="seed (overrides the config)")
-    p.add_argument("--workers", type=int, default=None, help="CPU devices the trials are split over (0: one per core)")
+    p.add_argument("--trials", type=_int_arg(1, "trials per row"), default=None,
+                   help="trials per row (overrides the config)")
+    p.add_argument("--seed", type=_int_arg(0, ""), default=None, help="seed (overrides the config)")
+    p.add_argument("--workers", type=_int_arg(0, "0: one per core"), default=None,
+                   help="CPU devices the trials are split over (0: one per core)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -250,7 +433,7 @@ def main(argv=None) -> int:
     c.add_argument("--out", default=None, help="camera.yaml to write (OpenCV FileStorage, plus a .json twin and "
                    "one overlay PNG per image)")
     c.add_argument("--method", default="bundle", choices=["bundle", "I", "IIa", "IIb"])
-    c.add_argument("--aspect-ratio", type=float, default=None, help="known fu / fv")
+    c.add_argument("--aspect-ratio", type=_number_arg(0.0, True, "fu / fv"), default=None, help="known fu / fv")
     c.add_argument("--outline-error", type=_nonnegative, default=0.1, metavar="PX",
                    help="systematic error of the outlines in px that their symmetry does not show "
                         "(segmentation, lens distortion); the outlines must show 3x this much perspective "
@@ -267,7 +450,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     try:
         return args.func(args)
-    except ValueError as e:
+    except (ValueError, OSError) as e:  # the user's input or the file system: one line, never a traceback
         print(f"sorjax: error: {e}", file=sys.stderr)
         return 2
 

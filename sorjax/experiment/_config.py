@@ -23,7 +23,9 @@ each combination is one row of the result table.  Example (``configs/table1.toml
     sigma = [0.5, 0.7, 1.0, 1.2, 1.5, 1.7, 2.0]
 
 Top-level keys
-    name (str, default: the file's stem), description (str), seed (int >= 0,
+    name (str, default: the file's stem; a plain name: it is the folder of the run
+    directories, and any character but letters, digits, '.', '_', '-' becomes '_'
+    there), description (str), seed (int >= 0,
     default 0), trials (int >= 1, default 100), methods (list of "I", "IIa", "IIb",
     "bundle" (free aspect), "bundle-unit" (aspect ratio 1 imposed); default all),
     gross_error (float, % of f, default 20: a trial whose focal error exceeds it, or
@@ -216,6 +218,14 @@ def _str(choices=None):
     return check
 
 
+def _name(v, key):
+    v = _str()(v, key)
+    if not v.strip() or any(c in v for c in "/\\\0") or v.startswith("."):
+        raise ConfigError(f"{key} must be a plain name, the run's folder in --out (letters, digits, '_', '-', '.'; "
+                          f"no path, not starting with '.'); got {v!r}")
+    return v
+
+
 def _bool(v, key):
     if not isinstance(v, bool):
         raise ConfigError(f"{key} must be true or false, got {v!r}")
@@ -291,7 +301,7 @@ def parse_config(data: dict, name: str = "experiment") -> Config:
         data,
         "",
         dict(
-            name=_str(), description=_str(), seed=_int(0), trials=_int(1), methods=_methods,
+            name=_name, description=_str(), seed=_int(0), trials=_int(1), methods=_methods,
             gross_error=_num(0, lo_open=True), workers=_int(0), scene=lambda v, k: v,
             noise=lambda v, k: v, fit=lambda v, k: v, bound=lambda v, k: v, reference=_reference,
         ),

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._files import absolute, atomic_folder, check_folder, safe_name
 from ._config import Config
 from ._report import error_figures, records_csv, reference_lines, scene_figure, summarise, table_markdown
 from ._trials import fixed_scene, run_batch, scene_for, trial_seed
@@ -122,6 +123,8 @@ def use_cpu_devices(n: int = 0) -> bool:
     of a chunk on its own thread: how a run uses every core of one machine.  Takes
     effect only before JAX starts its backend (call it first thing; the command line
     does); returns whether it did.  ``XLA_FLAGS`` set by the user wins."""
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+        raise ValueError(f"workers must be an integer >= 0 (0: one per core), got {n!r}")
     n = (os.cpu_count() or 1) if n == 0 else int(n)
     flags = os.environ.get("XLA_FLAGS", "")
     if "xla_force_host_platform_device_count" in flags or n <= 1:
@@ -163,14 +166,17 @@ def run_experiment(cfg: Config, out: str | os.PathLike | None = "runs", *, trial
                    seed: int | None = None, workers: int | None = None, progress: bool = True,
                    source: str | None = None) -> RunResult:
     """Run ``cfg`` (``trials``/``seed`` override the config's) and, unless ``out`` is
-    None, write the run directory ``out/<name>/<UTC timestamp>/``."""
+    None, write the run directory ``out/<name>/<UTC timestamp>/`` (``name`` made a
+    plain folder name by :func:`sorjax._files.safe_name`).  Where the run directory
+    goes is checked before any trial runs (ValueError when it cannot be written);
+    it is filled under a temporary name and renamed when complete."""
+    run_root = None if out is None else run_folder(cfg, out)
+    for name, value, lo in (("trials", trials, 1), ("seed", seed, 0)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo):
+            raise ValueError(f"{name} must be an integer >= {lo}, got {value!r}")
     if trials is not None:
-        if trials < 1:
-            raise ValueError(f"trials must be >= 1, got {trials}")
         cfg = cfg.replace(trials=int(trials))
     if seed is not None:
-        if seed < 0:
-            raise ValueError(f"seed must be >= 0, got {seed}")
         cfg = cfg.replace(seed=int(seed))
     enable_compilation_cache()
     t0 = time.perf_counter()
@@ -183,8 +189,40 @@ def run_experiment(cfg: Config, out: str | os.PathLike | None = "runs", *, trial
     if out is None:
         return res
     stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S.%fZ")
-    path = Path(out) / cfg.name / stamp
-    path.mkdir(parents=True, exist_ok=False)
+    with atomic_folder(run_root / stamp) as path:
+        _write_run(cfg, path, records, summary, bounds, table, seconds, source)
+    res.path = run_root / stamp
+    return res
+
+
+def run_folder(cfg: Config, out, what: str = "out") -> Path:
+    """``out/<name>``, the folder of ``cfg``'s run directories, after checking that it
+    can be written and stays inside ``out`` (ValueError naming ``what`` otherwise)."""
+    root = Path(out) / safe_name(cfg.name, "experiment")
+    if not absolute(root).is_relative_to(absolute(out)):  # safe_name makes this impossible; kept as the rule
+        raise ValueError(f"{what}: the run folder {root} would lie outside {out}")
+    check_folder(root, what)
+    return root
+
+
+def failure_summary(records: list[dict]) -> str | None:
+    """When no trial gave a successful calibration by any method: a sentence with the
+    commonest reasons (else None)."""
+    reasons: dict[str, int] = {}
+    for rec in records:
+        if "error" in rec:
+            reasons[rec["error"]] = reasons.get(rec["error"], 0) + 1
+            continue
+        if any(m["success"] for m in rec["methods"].values()):
+            return None
+        for m, x in rec["methods"].items():
+            reasons[f"{m}: {x['code']}"] = reasons.get(f"{m}: {x['code']}", 0) + 1
+    top = sorted(reasons.items(), key=lambda kv: -kv[1])[:3]
+    return (f"every one of the {len(records)} trials failed, by every method (" +
+            "; ".join(f"{why} x {n}" for why, n in top) + ")")
+
+
+def _write_run(cfg: Config, path: Path, records, summary, bounds, table, seconds, source) -> None:
     (path / "config.json").write_text(json.dumps(cfg.to_dict(), indent=1))
     if source is not None:
         (path / "config.toml").write_text(source)
@@ -201,8 +239,6 @@ def run_experiment(cfg: Config, out: str | os.PathLike | None = "runs", *, trial
     (path / "results.csv").write_text(records_csv(cfg, records))
     error_figures(cfg, summary, bounds, path)
     _scene_plot(cfg, records, path)
-    res.path = path
-    return res
 
 
 def _scene_plot(cfg: Config, records: list[dict], path: Path) -> None:
@@ -238,4 +274,4 @@ def _json_default(x):
     raise TypeError(f"not JSON-serialisable: {type(x).__name__}")
 
 
-__all__ = ["RunResult", "run_experiment", "run_trials", "compute_bounds", "environment", "trial_seed"]
+__all__ = ["RunResult", "failure_summary", "run_experiment", "run_folder", "run_trials", "compute_bounds", "environment", "trial_seed"]
