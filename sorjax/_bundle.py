@@ -35,6 +35,13 @@ the per-view fits' axes, or a safe spread of cameras when no linear omega is pos
 definite) is ranked by its cost, the best is polished by
 Gauss-Newton (Levenberg-Marquardt as the fallback; see :func:`fit_bundle`).
 
+Radial distortion (issue 18; :func:`bundle_estimate_distorted`): OpenCV's ``(k1[, k2])``
+about the principal point in camera-normalised coordinates join the intrinsics
+(``2V + 5`` / ``2V + 6`` parameters, ``problem.n_dist``); each sample of an observed
+outline is undistorted, moved by the pinhole homology and distorted again
+(:func:`distorted_transfer`), then read from the outline's own field.  With
+``n_dist = 0`` every function here traces exactly the program it did before.
+
 Uncertainty: at the optimum, ``Cov(y) = s^2 (J^T J)^-1`` with ``s^2 = |r|^2 / (VN - p)``,
 pushed to the pixel intrinsics ``(fu, fv, u0, v0)`` through the Jacobian of that map;
 intrinsics the views do not determine at all get an infinite variance (see
@@ -722,20 +729,71 @@ def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, opt
 DISTORTION_MODELS = {"none": 0, "k1": 1, "k1k2": 2}  # name -> number of radial coefficients
 
 
-def fit_distorted(problem: BundleProblem, y_free, options: Options = Options()):
-    """The bundle with distortion (``problem.n_dist = n > 0``) polished from the
-    distortion-free solution ``y_free = (k (4,), a (V, 2))`` with zero distortion,
-    ``(concat(k, 0_n), a)``: Gauss-Newton, Levenberg-Marquardt as the fallback
-    (:func:`sorjax._solvers.polish_traced`), each solve repeated while stale, accepted
-    at its step limit when as good as stationary (as :func:`fit_bundle`).  Pure.
+# k1 of the seeds built from the linear estimates (:func:`distorted_seeds`): none, and
+# a strong barrel distortion.  Measured on random scenes (experiments/distortion.py):
+# with k1 = -0.3 the distortion-free bundle can run off to f -> infinity (no
+# perspective: the distortion looks like its absence), where k1 has no effect at all
+# and a polish from that solution stays there.
+K1_SEEDS = (0.0, -0.25)
 
-    Returns ``(y, ok, steps)``: ``y = (k (4 + n,), a (V, 2))``."""
+
+def distorted_seeds(y_free, l_n, used, seeds, seed_ok, n_dist: int):
+    """The seeds of the bundle with distortion: the distortion-free solution
+    ``y_free = (k (4,), a (V, 2))`` with zero distortion, then every intrinsic seed
+    ``seeds`` (S, 4) (normalised ``(fu, fv, u0, v0)``, :func:`bundle_seeds`) with the
+    per-view fits' axes ``l_n`` and ``k1`` in :data:`K1_SEEDS` (``k2 = 0``).
+
+    Returns ``((k (P, 4 + n), a (P, V, 2)), ok (P,))``, ``P = 1 + S len(K1_SEEDS)``."""
     k0, a0 = y_free
-    y0 = (jnp.concatenate([k0, jnp.zeros(problem.n_dist, k0.dtype)]), a0)
-    cost0 = jnp.sum(residuals(y0, problem) ** 2)
-    final, steps = polish_traced(_runner(problem, options.bundle_max_steps), y0, cost0)
-    y, ok, _ = _converged(final, problem)
-    return y, ok, steps
+    l = jnp.where(used[:, None], jnp.asarray(l_n, jnp.float64), jnp.asarray([1.0, 0.0, 0.0]))
+    al = axis_params(l)
+    ks = pack_seeds(seeds, seed_ok)
+    z = jnp.zeros(n_dist - 1)
+    kk = [jnp.concatenate([k0, jnp.zeros(n_dist)])[None]]
+    aa = [a0[None]]
+    oks = [jnp.all(jnp.isfinite(k0)) & jnp.all(jnp.isfinite(a0))]
+    for k1 in K1_SEEDS:
+        d = jnp.concatenate([jnp.full((1,), k1), z])
+        kk.append(jnp.concatenate([ks, jnp.broadcast_to(d, (ks.shape[0], n_dist))], axis=1))
+        aa.append(jnp.broadcast_to(al, (ks.shape[0],) + al.shape))
+        oks.append(jnp.asarray(seed_ok, bool))
+    return (jnp.concatenate(kk), jnp.concatenate(aa)), jnp.concatenate([jnp.atleast_1d(o) for o in oks])
+
+
+def fit_distorted(problem: BundleProblem, y_seeds, seed_ok, options: Options = Options()):
+    """The bundle with distortion (``problem.n_dist = n > 0``) polished from every seed
+    ``y_seeds = (k (P, 4 + n), a (P, V, 2))`` that is ``seed_ok`` (:func:`distorted_seeds`):
+    Gauss-Newton, Levenberg-Marquardt as the fallback
+    (:func:`sorjax._solvers.polish_traced`), each solve repeated while stale, accepted
+    at its step limit when as good as stationary (as :func:`fit_bundle`); of the
+    polished seeds the converged one of lowest cost (else the lowest) is kept.  Every
+    seed is polished, not only the best at the start: a wrong basin (f -> infinity,
+    where k1 has no effect) is as good as stationary at once.  Pure (the seeds one
+    after another, ``lax.map``).
+
+    Returns ``(y, ok, steps)``: ``y = (k (4 + n,), a (V, 2))``, steps of all polishes."""
+    run = _runner(problem, options.bundle_max_steps)
+
+    def one(args):
+        y0, good = args
+
+        def polish():
+            cost0 = jnp.sum(residuals(y0, problem) ** 2)
+            final, steps = polish_traced(run, y0, cost0)
+            y, ok, cost = _converged(final, problem)
+            return y, ok, cost, steps
+
+        def skip():
+            return y0, jnp.asarray(False), jnp.asarray(jnp.inf), jnp.asarray(0, jnp.int32)
+
+        return jax.lax.cond(good, polish, skip)
+
+    ys, oks, costs, steps = jax.lax.map(one, (y_seeds, jnp.asarray(seed_ok, bool)))
+    P = oks.shape[0]
+    # converged first, then by cost (ties: the first seed)
+    best = jnp.lexsort((jnp.arange(P), costs, ~oks))[0]
+    y = jax.tree_util.tree_map(lambda x: x[best], ys)
+    return y, oks[best], jnp.sum(steps)
 
 
 class DistortedBundleOut(eqx.Module):
@@ -780,7 +838,8 @@ def bundle_estimate_distorted(points_n, used, inliers, l_n, seeds, seed_ok, aspe
     distorted again and read from the outline's own distance field
     (:func:`distorted_transfer`).  The distortion-free bundle (:func:`bundle_estimate`)
     runs first; the distorted fit is polished from its solution with zero distortion
-    (:func:`fit_distorted`).  Pure: jit, vmap over trials (``distortion`` static,
+    and from the linear seeds with k1 in :data:`K1_SEEDS`, the best kept
+    (:func:`distorted_seeds`, :func:`fit_distorted`).  Pure: jit, vmap over trials (``distortion`` static,
     ``options`` unbatched), grad (implicit, :func:`implicit_solution`).
 
     Args: as :func:`bundle_estimate` (``points_n`` (V, M, 2) observed, i.e. distorted,
@@ -798,7 +857,9 @@ def bundle_estimate_distorted(points_n, used, inliers, l_n, seeds, seed_ok, aspe
     base = make_problem(points_n, options.n_samples, aspect, inliers, used)
     problem = BundleProblem(base.fields, base.samples, base.weights, base.aspect, n)
     fixed = jax.lax.stop_gradient(problem)
-    y, ok, steps = fit_distorted(fixed, jax.lax.stop_gradient(free.y), options)
+    y_seeds, ok_seeds = distorted_seeds(jax.lax.stop_gradient(free.y), jax.lax.stop_gradient(l_n), used,
+                                        jax.lax.stop_gradient(seeds), seed_ok, n)
+    y, ok, steps = fit_distorted(fixed, y_seeds, ok_seeds, options)
     y = implicit_solution(y, problem)
     cov, s2, _ = covariance(y, problem, T)
     K, omega, vx, ls = solution_in_pixels(y, problem, T)
