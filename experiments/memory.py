@@ -3,14 +3,16 @@
 Each case runs in a Python process of its own (``--child CASE``), which reports its
 peak resident memory (``resource.getrusage(RUSAGE_SELF).ru_maxrss``), the same
 after the imports and after building the input (so the input's own share is
-visible), and the wall time of the call.  Cases, on SIZE x SIZE px (default 20000):
+visible), and the wall time of the call.  (Linux keeps a process's peak across
+fork and exec, so the parent stays small: the cli-mask files are written by another
+child.)  Cases, on SIZE x SIZE px (default 20000):
 
   mask-u8      outlines_from_mask on a uint8 0/255 mask holding one disc (radius 150 px)
   mask-soft    the same disc anti-aliased (an 8-bit soft mask)
   mask-bool    the disc as a bool mask
   label-u16    a uint16 label image with two discs (labels 1 and 2), label=2
   image-boxes  outlines_from_image on a uint8 BGR photograph, one disc (radius 300 px) in a box
-  image-auto   the same, one disc of radius SIZE / 12 found automatically
+  image-auto   the same, one disc of radius 0.03 SIZE (600 px) found automatically
   cli-mask     ``sorjax calibrate IMAGE --masks MASK`` on PNG files (uint8 BGR image,
                8-bit mask) holding two discs: reading, extraction, the (failed: discs are
                conics) calibration
@@ -43,6 +45,7 @@ def _disc(shape, centre, radius, value, dtype, soft=False):
     import numpy as np
 
     m = np.zeros(shape, dtype)
+    m.fill(0)  # touch every page: an input read from a file is resident
     sh = 4
     c = tuple(int(round(v * (1 << sh))) for v in centre)
     cv2.circle(m, c, int(round(radius * (1 << sh))), value, -1, cv2.LINE_AA if soft else cv2.LINE_8, sh)
@@ -91,7 +94,7 @@ def child(case: str, size: int, files: list[str]) -> dict:
     elif case in ("image-boxes", "image-auto"):
         import cv2
 
-        r = 300.0 if case == "image-boxes" else n / 12.0
+        r = 300.0 if case == "image-boxes" else 0.03 * n
         data = np.full((n, n, 3), 90, np.uint8)
         c = tuple(int(v * 16) for v in centre)
         cv2.circle(data, c, int(r * 16), (40, 170, 230), -1, cv2.LINE_AA, 4)
@@ -132,6 +135,9 @@ def main() -> None:
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--files", nargs="*", default=[], help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.child == "files":
+        print(json.dumps(_files(args.size, args.files[0])))
+        return
     if args.child:
         print(json.dumps(child(args.child, args.size, args.files)))
         return
@@ -140,7 +146,11 @@ def main() -> None:
     print(f"sorjax {sorjax.__file__}; {args.size} x {args.size} px; peak = ru_maxrss of the process")
     print(f"{'case':12s} {'imports MB':>10s} {'+input MB':>10s} {'peak MB':>9s} {'work MB':>8s} {'s':>6s}  result")
     with tempfile.TemporaryDirectory() as tmp:
-        files = _files(args.size, tmp) if "cli-mask" in args.cases else ()
+        files = ()
+        if "cli-mask" in args.cases:  # written by a process of its own: a child inherits its parent's peak (fork)
+            r = subprocess.run([sys.executable, __file__, "--child", "files", "--size", str(args.size), "--files", tmp],
+                               capture_output=True, text=True, timeout=args.timeout, check=True)
+            files = json.loads(r.stdout.strip().splitlines()[-1])
         for case in args.cases:
             cmd = [sys.executable, __file__, "--child", case, "--size", str(args.size), "--files", *files]
             try:

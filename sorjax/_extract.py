@@ -87,6 +87,7 @@ _HINTS = {
               "give a mask with the object(s) non-zero on a zero background"),
     "float": ("Divide an 8-bit mask by 255, or pass a label image with label=VALUE",
               "Save the mask as an 8-bit image (0 background, 255 object)"),
+    "min_area_is": ("min_area = ", ""),
     "min_area": ("lower min_area if the objects are really that small",
                  "show the objects larger (the command line ignores smaller ones)"),
     "cut": (", or pass border='cut' to keep the cut outline", ""),
@@ -651,7 +652,7 @@ def _outlines_from_field(F, *, min_area, smooth, border, what="mask", crop=True)
     big = [(a, p) for a, p in outer if a >= min_area]
     if not big:
         raise ValueError(
-            f"the {what} holds no object of at least min_area = {min_area:g} px^2 (largest: "
+            f"the {what} holds no object of at least {_hint('min_area_is')}{min_area:g} px^2 (largest: "
             f"{outer[0][0]:.1f} px^2); {_hint('min_area')}"
         )
     # variance of the blur that moved the level set, and the arc-length scale on which
@@ -936,25 +937,76 @@ def _gradient_magnitude(img: np.ndarray, sigma: float) -> np.ndarray:
     return np.sqrt(np.sum(gx * gx + gy * gy, axis=2))
 
 
-def _edge_sharpness(img: np.ndarray, fg: np.ndarray) -> float:
+def _edge_gradients(img: np.ndarray, fg: np.ndarray, core=None) -> tuple[np.ndarray, np.ndarray]:
+    """``(fine, coarse)``: at the boundary pixels of ``fg`` (within ``core``, a window
+    ``(y0, y1, x0, x1)`` of it, when given), the largest colour-gradient magnitude
+    within 2 px after a Gaussian blur of 0.7 px and of 1.5 px."""
+    u8 = np.asarray(fg, dtype=np.uint8)
+    din = cv2.distanceTransform(u8, cv2.DIST_L2, 5)
+    dout = cv2.distanceTransform(1 - u8, cv2.DIST_L2, 5)
+    edge = ((din > 0) & (din <= 1)) | ((dout > 0) & (dout <= 1))
+    if core is not None:
+        y0, y1, x0, x1 = core
+        keep = np.zeros_like(edge)
+        keep[y0:y1, x0:x1] = True
+        edge &= keep
+    if not edge.any():
+        return np.zeros(0), np.zeros(0)
+    k = np.ones((5, 5), np.uint8)
+    return cv2.dilate(_gradient_magnitude(img, 0.7), k)[edge], cv2.dilate(_gradient_magnitude(img, 1.5), k)[edge]
+
+
+def _edge_sharpness(image, fg: np.ndarray) -> float:
     """How wide the colour edges along the boundary of ``fg`` are (see :func:`_inner_band`).
 
     The median, over the boundary pixels with the stronger half of the gradients, of
     the largest colour-gradient magnitude within 2 px after a Gaussian blur of 1.5 px
     divided by the same after 0.7 px; the step response gives about
     ``sqrt((s^2 + 0.49) / (s^2 + 2.25))`` for an edge of width (sigma) ``s``: larger for
-    blurred edges."""
-    u8 = np.asarray(fg, dtype=np.uint8)
-    din = cv2.distanceTransform(u8, cv2.DIST_L2, 5)
-    dout = cv2.distanceTransform(1 - u8, cv2.DIST_L2, 5)
-    edge = ((din > 0) & (din <= 1)) | ((dout > 0) & (dout <= 1))
-    if not edge.any():
+    blurred edges.  ``image``: float64 BGR (H, W, 3), or a function of a window
+    ``(y0, y1, x0, x1)`` giving it there (then computed tile by tile, :func:`_tiles`)."""
+    parts = [_edge_gradients(image(*pad), fg[pad[0]:pad[1], pad[2]:pad[3]], core)
+             for pad, core in _tiles(fg, _EDGE_REACH)] if callable(image) else [_edge_gradients(image, fg)]
+    fine = np.concatenate([f for f, _ in parts])
+    coarse = np.concatenate([c for _, c in parts])
+    if len(fine) == 0:
         return float("nan")
-    k = np.ones((5, 5), np.uint8)
-    fine = cv2.dilate(_gradient_magnitude(img, 0.7), k)[edge]
-    coarse = cv2.dilate(_gradient_magnitude(img, 1.5), k)[edge]
     strong = fine >= np.median(fine)
     return float(np.median(coarse[strong] / np.maximum(fine[strong], 1e-9)))
+
+
+# Tiles: the unmixing and the edge measure read a few pixels around each pixel (blurs
+# of sigma <= 1.5 px: kernel radius <= 6; distances thresholded below 5 px; a 5 x 5
+# dilation), so a window is processed in tiles with a halo of _TILE_HALO px: the same
+# numbers as on the whole window (tests), in ~100 MB instead of ~500 bytes per pixel.
+_TILE = 512
+_TILE_HALO = 16
+_EDGE_REACH = 2  # boundary pixels: within 1 px of the other side
+
+
+def _tiles(fg: np.ndarray, reach: int):
+    """``(padded window, core within it)`` of the tiles of ``fg`` that hold a boundary
+    pixel (within ``reach`` px of both sides), the padded window reaching
+    ``_TILE_HALO`` px beyond the core (clipped to ``fg``)."""
+    H, W = fg.shape
+    for y in range(0, H, _TILE):
+        for x in range(0, W, _TILE):
+            y0, y1, x0, x1 = max(0, y - _TILE_HALO), min(H, y + _TILE + _TILE_HALO), \
+                max(0, x - _TILE_HALO), min(W, x + _TILE + _TILE_HALO)
+            near = fg[max(0, y - reach):min(H, y + _TILE + reach), max(0, x - reach):min(W, x + _TILE + reach)]
+            if near.all() or not near.any():
+                continue
+            yield (y0, y1, x0, x1), (y - y0, min(H, y + _TILE) - y0, x - x0, min(W, x + _TILE) - x0)
+
+
+def _soft_alpha_tiled(image, fg: np.ndarray, *, inner: float) -> np.ndarray:
+    """:func:`_soft_alpha` tile by tile (:func:`_tiles`); ``image`` a function of a
+    window ``(y0, y1, x0, x1)`` giving the float64 BGR image there."""
+    alpha = np.asarray(fg, dtype=np.float64).copy()
+    for (y0, y1, x0, x1), (a0, a1, b0, b1) in _tiles(fg, int(math.ceil(inner)) + 1):
+        part = _soft_alpha(image(y0, y1, x0, x1), fg[y0:y1, x0:x1], inner=inner)
+        alpha[y0 + a0:y0 + a1, x0 + b0:x0 + b1] = part[a0:a1, b0:b1]
+    return alpha
 
 
 def _inner_band(ratios: list[float]) -> float:
@@ -1027,7 +1079,11 @@ def _finish(src: _Image, box, k, window, fg, *, inner, min_area, smooth, border)
     warning; ``inner`` is the unmixing band (None: no refinement, the binary mask)."""
     H, W = src.shape
     cx0, cy0, cx1, cy1 = window
-    alpha = fg.astype(np.float64) if inner is None else _soft_alpha(src.f64(cy0, cy1, cx0, cx1), fg, inner=inner)
+    if inner is None:
+        alpha = fg.astype(np.float64)
+    else:
+        alpha = _soft_alpha_tiled(lambda y0, y1, x0, x1: src.f64(cy0 + y0, cy0 + y1, cx0 + x0, cx0 + x1), fg,
+                                  inner=inner)
     # the crop is only a window: pad it with background where it is not at the image border
     pad = ((3 if cy0 > 0 else 0, 3 if cy1 < H else 0), (3 if cx0 > 0 else 0, 3 if cx1 < W else 0))
     big = np.pad(alpha, pad, mode="constant")
@@ -1114,7 +1170,9 @@ def _finish_all(src: _Image, segs, *, refine, min_area, smooth, border) -> list[
     """Outlines of the segmented objects of one image, with one unmixing band for all."""
     inner = None
     if refine and segs:
-        inner = _inner_band([_edge_sharpness(src.f64(w[1], w[3], w[0], w[2]), fg) for _, _, w, fg in segs])
+        inner = _inner_band([_edge_sharpness(lambda y0, y1, x0, x1, w=w: src.f64(w[1] + y0, w[1] + y1, w[0] + x0,
+                                                                              w[0] + x1), fg)
+                             for _, _, w, fg in segs])
     out = []
     for k, b, w, fg in segs:
         p = _finish(src, b, k, w, fg, inner=inner, min_area=min_area, smooth=smooth, border=border)

@@ -341,7 +341,7 @@ def _calibrate(args) -> int:
     for i, src in enumerate(sources):
         status = "used" if i in used else f"dropped: {dropped.get(i, 'not used')}"
         r = rms.get(i, float(cal.homologies[i].rms))
-        print(f" {i:4d}  {src[:30]:30s}  {r:17.3f}  {status}")
+        print(f" {i:4d}  {src if len(src) <= 30 else '...' + src[-27:]:30s}  {r:17.3f}  {status}")
     if plan is not None and images:
         import cv2
 
