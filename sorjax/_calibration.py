@@ -22,8 +22,9 @@ from jaxtyping import Array, Float, Int
 
 from ._checks import check_sizes
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
-from ._outline import DEFAULT_POINTS, as_outlines
-from .core._assess import ASYMMETRIC, COLLAPSED_FOCAL, CONIC, MASKED, PP_OUTSIDE, TRIMMED, USED, WIDE_FOV
+from ._outline import DEFAULT_POINTS, as_outlines, implied_outline_error
+from .core._assess import ASYMMETRIC, COLLAPSED_FOCAL, CONIC, DUPLICATE, MASKED, PP_OUTSIDE, TRIMMED, USED, WIDE_FOV
+from .core._checks import CULPRIT_ASPECT, CULPRIT_VIEWS, MODEL_CONTRADICTED, MODEL_WIDENED, ModelChecks
 from .core._calibrate import calibrate_methods
 from .core._options import Options
 from .core._result import RESULTS
@@ -71,6 +72,13 @@ class Calibration(eqx.Module):
             perspective fixes the focal length; see ``outline_error`` in :func:`calibrate`.
         perspective_z: the same evidence in units of the symmetry noise,
             ``sqrt(delta cost / s^2)`` (a z-score against "no perspective").
+        outline_error: the outline error allowed for (px): the declared one, or more
+            when the coordinates show it (whole-pixel or mask-staircase outlines).
+        checks: the model checks' statistics (:class:`sorjax.core.ModelChecks`): a
+            known aspect ratio against the free fit, the views' consistency with one
+            camera, duplicated views.  ``RESULTS.inconsistent`` when the outlines
+            contradict the model; the standard deviations widened (and a warning) when
+            the model is only not confirmed.
     """
 
     K: Float[Array, "3 3"]
@@ -91,6 +99,8 @@ class Calibration(eqx.Module):
     notes: tuple[str, ...] = eqx.field(static=True, default=())
     perspective_px: float = eqx.field(static=True, default=math.nan)
     perspective_z: float = eqx.field(static=True, default=math.nan)
+    outline_error: float = eqx.field(static=True, default=math.nan)
+    checks: ModelChecks | None = None
 
     @property
     def std(self) -> np.ndarray:
@@ -368,9 +378,10 @@ def _code_item(result):
     return RESULTS._name_to_item[code_name(result)]
 
 
-def _drop_texts(h, i: int, d: int, name: str):
+def _drop_texts(h, i: int, d: int, name: str, dup_of=None):
     """``(reason, warning)`` for view ``i`` dropped by the core for reason ``d``
-    (:data:`sorjax.core._assess.DROP_REASONS`), or None when it is used."""
+    (:data:`sorjax.core._assess.DROP_REASONS`; ``dup_of`` (V,) the view each
+    duplicates), or None when it is used."""
     o = Options()
     rms = max(float(h.rms[i]), float(h.rms_untrimmed[i]))
     tr = float(h.trimmed[i])
@@ -395,10 +406,17 @@ def _drop_texts(h, i: int, d: int, name: str):
             "check the segmentation of this view.")
     if d == MASKED:
         return "left out by the caller", None
+    if d == DUPLICATE:
+        j = int(dup_of[i]) if dup_of is not None else -1
+        other = f"view {j}" if j >= 0 else "an earlier view"
+        return f"the same outline as {other}", (
+            f"{name}: the same outline as {other} (within {o.duplicate_px:g} px RMS): the same view passed twice "
+            "adds no information but would shrink the standard deviations by sqrt(2) as if it did. Dropped; "
+            "take each view from a different position of the object or camera.")
     return None
 
 
-def view_notes(h, drop_reason, names=None) -> list[str]:
+def view_notes(h, drop_reason, names=None, dup_of=None) -> list[str]:
     """The per-view warnings of a calibration, from the per-view homologies ``h``
     (:class:`sorjax.core.ViewHomologies`, numpy) and the core's drop reasons: fits
     that did not converge, views dropped (conic, not symmetric) and kept with a
@@ -408,7 +426,7 @@ def view_notes(h, drop_reason, names=None) -> list[str]:
     notes = [f"{name}: the homology fit did not converge (rms {float(h.rms[i]):.3g} px)."
              for i, name in enumerate(names) if not bool(h.converged[i])]
     for i, name in enumerate(names):
-        dropped = _drop_texts(h, i, int(drop_reason[i]), name)
+        dropped = _drop_texts(h, i, int(drop_reason[i]), name, dup_of)
         if dropped is not None:
             if dropped[1]:
                 notes.append(dropped[1])
@@ -423,11 +441,11 @@ def view_notes(h, drop_reason, names=None) -> list[str]:
     return notes
 
 
-def dropped_views(h, drop_reason) -> tuple[tuple[int, str], ...]:
+def dropped_views(h, drop_reason, dup_of=None) -> tuple[tuple[int, str], ...]:
     """``(view index, reason)`` of each view the core left out."""
     out = []
     for i, d in enumerate(np.asarray(drop_reason)):
-        dropped = _drop_texts(h, i, int(d), f"view {i}")
+        dropped = _drop_texts(h, i, int(d), f"view {i}", dup_of)
         if dropped is not None:
             out.append((i, dropped[0]))
     return tuple(out)
@@ -451,9 +469,61 @@ def verdict_notes(r, method: str, a, points=None) -> list[str]:
     ]
 
 
+def _worst_views(ch, k: int = 2) -> str:
+    """The views whose release from the joint model lowers the cost most (text)."""
+    S = np.asarray(ch.view_score, float)
+    order = [int(i) for i in np.argsort(-np.nan_to_num(S, nan=-1.0)) if np.isfinite(S[i])][:k]
+    return ", ".join(f"view {i} (score {S[i]:.3g}, {float(ch.view_px[i]):.2g} px)" for i in order)
+
+
+def _aspect_text(ch) -> str:
+    return (f"aspect_ratio={float(ch.aspect_fixed):g} is not what the outlines show: with the aspect ratio free "
+            f"they give fu / fv = {float(ch.aspect_free):.4f} +- {float(ch.aspect_free_std):.2g}, "
+            f"{float(ch.aspect_z):.3g} standard deviations away, and fit {float(ch.aspect_px):.2g} px RMS better")
+
+
+def _views_text(ch) -> str:
+    return (f"the views are not consistent with one camera: released from the joint model their homologies fit "
+            f"{float(ch.consistency_px):.2g} px RMS better, far beyond their noise (chi-square p = "
+            f"{float(ch.consistency_p):.2g} on {int(ch.consistency_dof)} degrees of freedom); most of it in "
+            + _worst_views(ch))
+
+
+def model_notes(r, outline_error: float) -> list[str]:
+    """The warning of a calibration whose model the outlines do not confirm (the
+    uncertainty widened: :mod:`sorjax.core._checks`), from the core's result ``r``."""
+    ch = r.checks
+    if int(ch.verdict) != MODEL_WIDENED or code_name(r.result) not in ("successful", "degenerate",
+                                                                      "only_principal_point"):
+        return []
+    notes = []
+    if np.isfinite(float(ch.aspect_z)) and float(ch.aspect_z) >= Options().consistency_z:
+        notes.append(
+            _aspect_text(ch) + f", within what the declared outline error ({float(outline_error):g} px) could "
+            "cause. The standard deviations include the difference between the fixed and the free estimates; "
+            "if the aspect ratio is not known exactly, pass aspect_ratio=None.")
+    if float(ch.inflation) > 1.0:
+        notes.append(
+            _views_text(ch) + f". The standard deviations are scaled by sqrt({float(ch.inflation):.3g}) (the "
+            "views' disagreement over their noise). Check that every view comes from the same camera and zoom, "
+            "uncropped and unresized, and that each outline is a surface of revolution.")
+    return notes
+
+
 def details_for(r, h, points, method: str, a, outline_error: float, image_size=None) -> str:
     """What is specific to a result that is not a plain success (``Calibration.details``)."""
     name = code_name(r.result)
+    if name == "inconsistent":
+        ch = r.checks
+        lim = f"{Options().perspective_factor * float(outline_error):.2g}"
+        if int(ch.culprit) == CULPRIT_ASPECT:
+            return (_aspect_text(ch) + f", more than the declared outline error ({float(outline_error):g} px; "
+                    f"needs < {lim} px) can explain. Pass aspect_ratio=None to estimate it, or the right value "
+                    "(resized or non-square-pixel images have fu / fv != 1).")
+        return (_views_text(ch) + f", more than the declared outline error ({float(outline_error):g} px; needs < "
+                f"{lim} px) can explain. Were all views taken with the same camera and zoom, uncropped and "
+                "unresized? Is every outline a surface of revolution (not a flat symmetric shape)? Leave out the "
+                "views that disagree, or calibrate each camera on its own.")
     used = np.flatnonzero(np.asarray(r.used))
     drop = np.asarray(r.drop_reason)
     vs = ", ".join(str(i) for i in used)
@@ -551,7 +621,10 @@ def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, opt
               np.asarray(image_size, np.float64), valid)[_SHELL_METHODS.index(method)]
     r = jax.tree_util.tree_map(np.asarray, r)
     per_view = ("used", "drop_reason", "view_rms", "v_x", "l_s")
-    return eqx.tree_at(lambda x: [getattr(x, k) for k in per_view], r, [getattr(r, k)[:V] for k in per_view])
+    r = eqx.tree_at(lambda x: [getattr(x, k) for k in per_view], r, [getattr(r, k)[:V] for k in per_view])
+    per_check = ("view_score", "view_px", "duplicate_of")
+    return eqx.tree_at(lambda x: [getattr(x.checks, k) for k in per_check], r,
+                       [getattr(r.checks, k)[:V] for k in per_check])
 
 
 def calibrate(
@@ -648,6 +721,22 @@ def calibrate(
     if homologies is None:
         homologies = tuple(fit_homology(o, n_samples=n_samples, n_points=n_points) for o in outs)
     homologies = tuple(homologies)
+    # outlines on a pixel grid carry at least their quantisation (or a mask's staircase)
+    raw = list(outlines) if isinstance(outlines, (list, tuple, np.ndarray)) else []
+    implied = [implied_outline_error(o) for o in raw] or [(0.0, "")]
+    floor_px, floor_kind = max(implied, key=lambda t: t[0])
+    floor_note = []
+    if floor_px > float(outline_error):
+        which = [i for i, t in enumerate(implied) if t[0] == floor_px]
+        why = ("traced along a binary mask's pixels (a staircase about half a pixel inside the true edge, as "
+               "cv2.findContours gives)" if floor_kind == "staircase" else
+               "rounded to whole or half pixels (1/sqrt(12) px of rounding error per coordinate)")
+        floor_note.append(
+            f"outline{'s' if len(which) > 1 else ''} {', '.join(map(str, which))}: the coordinates are {why}; "
+            f"the outline error is taken as {floor_px:.2g} px instead of the declared {float(outline_error):g} px. "
+            "Sub-pixel outlines (sorjax.outlines_from_mask, or the 0.5 level of a blurred mask) are far more "
+            "accurate.")
+        outline_error = floor_px
     options = Options(n_samples=n_samples, outline_error_px=float(outline_error))
     a = None if method in ("IIa",) or (method == "bundle" and aspect_ratio is None) else (
         1.0 if aspect_ratio is None else float(aspect_ratio)
@@ -657,7 +746,9 @@ def calibrate(
     r = _run_core(points, homs, method, math.nan if aspect_ratio is None else float(aspect_ratio), options,
                   (math.nan, math.nan) if image_size is None else image_size)
 
-    notes = view_notes(homs, r.drop_reason) + verdict_notes(r, method, a, outs)
+    dup_of = np.asarray(r.checks.duplicate_of)
+    notes = (floor_note + view_notes(homs, r.drop_reason, dup_of=dup_of) + model_notes(r, outline_error)
+             + verdict_notes(r, method, a, outs))
     for msg in notes:
         warnings.warn(msg, stacklevel=2)
     used = tuple(int(i) for i in np.flatnonzero(r.used))
@@ -665,8 +756,9 @@ def calibrate(
     cal = Calibration(
         jnp.asarray(r.K), jnp.asarray(r.omega), homologies, _code_item(r.result), jnp.asarray(r.covariance),
         jnp.asarray(r.cost), jnp.asarray(r.view_rms[r.used]), jnp.asarray(r.steps), jnp.asarray(r.v_x[r.used]),
-        jnp.asarray(r.l_s[r.used]), method, a, used, details, dropped_views(homs, r.drop_reason), tuple(notes),
-        float(r.perspective_px), float(r.perspective_z),
+        jnp.asarray(r.l_s[r.used]), method, a, used, details, dropped_views(homs, r.drop_reason, dup_of),
+        tuple(notes), float(r.perspective_px), float(r.perspective_z), float(outline_error),
+        jax.tree_util.tree_map(jnp.asarray, r.checks),
     )
     if throw and not cal.success:
         raise CalibrationError(cal.message)

@@ -13,6 +13,7 @@ messages.
 
 from ._calibrate import calibrate as calibrate, calibrate_homologies as calibrate_homologies
 from ._calibrate import calibrate_methods as calibrate_methods, fit_homologies as fit_homologies
+from ._checks import ModelChecks as ModelChecks
 from ._options import Options as Options
 from ._prepare import Views as Views, joint_transform as joint_transform, prepare_views as prepare_views
 from ._result import RESULTS as RESULTS, CoreResult as CoreResult

@@ -14,8 +14,9 @@ from jaxtyping import Array, Bool, Float, Int
 from ._options import Options
 
 # Why a view was left out (``CoreResult.drop_reason``); 0: used.
-USED, CONIC, TRIMMED, ASYMMETRIC, MASKED = 0, 1, 2, 3, 4
-DROP_REASONS = ("used", "conic outline", "not symmetric (too much trimmed)", "not symmetric", "masked by the caller")
+USED, CONIC, TRIMMED, ASYMMETRIC, MASKED, DUPLICATE = 0, 1, 2, 3, 4, 5
+DROP_REASONS = ("used", "conic outline", "not symmetric (too much trimmed)", "not symmetric", "masked by the caller",
+                "the same view as an earlier one")
 
 # Why an estimate is implausible (``Verdict.implausible``); 0: plausible.
 PLAUSIBLE, COLLAPSED_FOCAL, WIDE_FOV, PP_OUTSIDE = 0, 1, 2, 3

@@ -24,8 +24,10 @@ from jaxtyping import Array, Bool, Float, Int
 from .._bundle import bundle_estimate, bundle_seeds, linearised_covariance
 from .._camera import intrinsics_matrix, transform_points
 from .._linear import linear_estimate
-from ._assess import (USED, assess, axes_intersection, outline_extent, outline_radius, perspective_gate,
-                      view_verdicts)
+from ._assess import (DUPLICATE, USED, assess, axes_intersection, outline_extent, outline_radius,
+                      perspective_gate, view_verdicts)
+from ._checks import (CULPRIT_ASPECT, CULPRIT_VIEWS, MODEL_CONTRADICTED, MODEL_OK, MODEL_WIDENED, NO_CULPRIT,
+                      ModelChecks, consistency, duplicate_views, fixed_aspect_check, view_scores)
 from ._options import Options
 from ._prepare import joint_transform, prepare_views
 from ._result import RESULTS, CoreResult
@@ -72,6 +74,7 @@ class _Common(NamedTuple):
     """What every method of one calibration shares."""
 
     radius: Array
+    duplicate_of: Array
     drop: Array
     used: Array
     n_used: Array
@@ -86,11 +89,13 @@ class _Common(NamedTuple):
 def _common(points, homs: ViewHomologies, valid, options: Options) -> _Common:
     radius = outline_radius(points)
     drop = view_verdicts(homs.rms, homs.rms_untrimmed, radius, homs.is_conic, homs.trimmed, valid, options)
+    dup = duplicate_views(points, drop == USED, options)
+    drop = jnp.where((drop == USED) & (dup >= 0), DUPLICATE, drop).astype(jnp.int32)
     used = drop == USED
     # the normalisation is a constant for differentiation (K in pixels does not depend on it)
     T = jax.lax.stop_gradient(joint_transform(points, used))
     return _Common(
-        radius=radius, drop=drop, used=used, n_used=jnp.sum(used),
+        radius=radius, duplicate_of=dup, drop=drop, used=used, n_used=jnp.sum(used),
         all_inf=jnp.all(jnp.where(used, homs.at_infinity, True)), T=T, rms_u=jnp.where(used, homs.rms, jnp.nan),
         points_n=transform_points(T, points), l_n=homs.l_s @ jnp.linalg.inv(T),  # lines map by T^-T
         inliers=homs.inliers.astype(jnp.float64),
@@ -98,8 +103,30 @@ def _common(points, homs: ViewHomologies, valid, options: Options) -> _Common:
 
 
 def _bundle(c: _Common, homs: ViewHomologies, aspect, options: Options):
+    """The bundle for one aspect model and the score statistics of its views
+    (:func:`sorjax.core._checks.view_scores`): ``(BundleOut, (S, delta_px2, n))``."""
     seeds, seed_ok = bundle_seeds(homs.v_x, homs.l_s, c.used, c.T, aspect)
-    return bundle_estimate(c.points_n, c.used, c.inliers, c.l_n, seeds, seed_ok, aspect, c.T, options)
+    out = bundle_estimate(c.points_n, c.used, c.inliers, c.l_n, seeds, seed_ok, aspect, c.T, options)
+    y = jax.lax.stop_gradient(out.y)
+    return out, view_scores(y, c.points_n, c.used, c.inliers, aspect, c.T, options)
+
+
+def _bundles(c: _Common, homs: ViewHomologies, aspects, options: Options):
+    """The bundles of every aspect model in ``aspects`` (one traced solver,
+    ``jax.lax.map``) and the free-aspect fit the model checks compare a known aspect
+    ratio with: the one among them when there is one, else one more solve, run only
+    when some aspect ratio is known (``jax.lax.cond``; under ``jax.vmap`` both branches
+    run).  Returns ``(stacked results, free result)``."""
+    k = aspects.shape[0]
+    need = jnp.any(jnp.isfinite(aspects)) & ~jnp.any(jnp.isnan(aspects))
+    run_aspects = jnp.concatenate([aspects, jnp.full(1, jnp.nan)])
+    run = jnp.concatenate([jnp.ones(k, bool), need[None]])
+    solve = lambda a: _bundle(c, homs, a, options)  # noqa: E731
+    shape = jax.eval_shape(solve, aspects[0])
+    skip = lambda a: jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shape)  # noqa: E731
+    outs = jax.lax.map(lambda ar: jax.lax.cond(ar[1], solve, skip, ar[0]), (run_aspects, run))
+    i_free = jnp.where(jnp.any(jnp.isnan(aspects)), jnp.argmax(jnp.isnan(aspects)), k)
+    return outs, jax.tree_util.tree_map(lambda x: x[i_free], outs)
 
 
 def _linear_aspect(method: str, aspect):
@@ -129,7 +156,9 @@ def calibrate_homologies(points: Float[Array, "V M 2"], homs: ViewHomologies, me
     points, valid, image_size, aspect = _check(points, valid, image_size, aspect)
     c = _common(points, homs, valid, options)
     if method == "bundle":
-        return _finish(points, homs, c, method, aspect, image_size, options, bundle=_bundle(c, homs, aspect, options))
+        outs, free = _bundles(c, homs, aspect[None], options)
+        b = jax.tree_util.tree_map(lambda x: x[0], outs)
+        return _finish(points, homs, c, method, aspect, image_size, options, bundle=b, free=free)
     a_m = _linear_aspect(method, aspect)
     K, omega, ok = linear_estimate(homs.v_x, homs.l_s, c.used, c.T, a_m, method=method)
     return _finish(points, homs, c, method, aspect, image_size, options, linear=(K, omega, ok, _linear_cov(c, K, a_m, options)))
@@ -150,7 +179,7 @@ def calibrate_methods(points: Float[Array, "V M 2"], homs: ViewHomologies, metho
     c = _common(points, homs, valid, options)
     ib = [i for i, m in enumerate(methods) if m == "bundle"]
     il = [i for i, m in enumerate(methods) if m != "bundle"]
-    bundles = jax.lax.map(lambda a: _bundle(c, homs, a, options), aspects[jnp.asarray(ib)]) if ib else None
+    bundles, free = _bundles(c, homs, aspects[jnp.asarray(ib)], options) if ib else (None, None)
     lin = {}
     if il:
         a_ms = jnp.stack([_linear_aspect(methods[i], aspects[i]) for i in il])
@@ -162,22 +191,62 @@ def calibrate_methods(points: Float[Array, "V M 2"], homs: ViewHomologies, metho
     for i, m in enumerate(methods):
         if m == "bundle":
             b = jax.tree_util.tree_map(lambda x: x[ib.index(i)], bundles)
-            out.append(_finish(points, homs, c, m, aspects[i], image_size, options, bundle=b))
+            out.append(_finish(points, homs, c, m, aspects[i], image_size, options, bundle=b, free=free))
         else:
             out.append(_finish(points, homs, c, m, aspects[i], image_size, options, linear=lin[i]))
     return tuple(out)
 
 
+def _model_checks(out, scores, free_fit, aspect, c: _Common, options: Options):
+    """The model checks of a bundle estimate (:mod:`sorjax.core._checks`): ``(checks,
+    cov)`` with ``cov`` the bundle's covariance widened as the checks say."""
+    S, delta, n = scores
+    free_out = free_fit[0]
+    a_free, a_std, a_z, a_px, a_rej, a_beyond = fixed_aspect_check(
+        aspect, out.K, out.cost, free_out.K, free_out.cov, free_out.cost, free_out.ok, out.n, options)
+    dof, p, g, v_rej, v_beyond, birge = consistency(S, delta, n, c.used, aspect, options)
+    est = jnp.stack([out.K[0, 0], out.K[1, 1], out.K[0, 2], out.K[1, 2]])
+    est_free = jnp.stack([free_out.K[0, 0], free_out.K[1, 1], free_out.K[0, 2], free_out.K[1, 2]])
+    d = jnp.where(a_rej & ~a_beyond, est - est_free, 0.0)
+    inflation = jnp.where(v_rej & ~v_beyond, jnp.maximum(birge, 1.0), 1.0)
+    cov = out.cov * inflation + jnp.outer(d, d)
+    contradicted = a_beyond | v_beyond
+    verdict = jnp.where(contradicted, MODEL_CONTRADICTED, jnp.where(a_rej | v_rej, MODEL_WIDENED, MODEL_OK))
+    culprit = jnp.where(a_beyond | (a_rej & ~v_beyond), CULPRIT_ASPECT,
+                        jnp.where(v_rej, CULPRIT_VIEWS, NO_CULPRIT))
+    checks = ModelChecks(
+        outline_error_px=jnp.asarray(options.outline_error_px, jnp.float64), aspect_fixed=jnp.asarray(aspect),
+        aspect_free=a_free, aspect_free_std=a_std, aspect_z=a_z, aspect_px=a_px, view_score=S,
+        view_px=jnp.where(c.used, jnp.sqrt(delta / jnp.maximum(n, 1.0)), jnp.nan), consistency_dof=dof,
+        consistency_p=p, consistency_px=g, inflation=inflation, verdict=verdict.astype(jnp.int32),
+        culprit=culprit.astype(jnp.int32), duplicate_of=c.duplicate_of)
+    return checks, cov
+
+
+def _no_checks(aspect, c: _Common, options: Options) -> ModelChecks:
+    """The checks of a linear method's estimate: none run (the bundle's result has
+    them), duplicates found."""
+    nan = jnp.asarray(jnp.nan)
+    V = c.used.shape[0]
+    return ModelChecks(
+        outline_error_px=jnp.asarray(options.outline_error_px, jnp.float64), aspect_fixed=jnp.asarray(aspect),
+        aspect_free=nan, aspect_free_std=nan, aspect_z=nan, aspect_px=nan, view_score=jnp.full(V, jnp.nan),
+        view_px=jnp.full(V, jnp.nan), consistency_dof=jnp.asarray(0, jnp.int32), consistency_p=nan,
+        consistency_px=nan, inflation=jnp.asarray(1.0), verdict=jnp.asarray(MODEL_OK, jnp.int32),
+        culprit=jnp.asarray(NO_CULPRIT, jnp.int32), duplicate_of=c.duplicate_of)
+
+
 def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image_size, options: Options, bundle=None,
-            linear=None) -> CoreResult:
+            linear=None, free=None) -> CoreResult:
     """The verdicts and the result of one method's estimate (``bundle``: a
-    :class:`sorjax._bundle.BundleOut`; ``linear``: ``(K, omega, ok, cov_unit)``)."""
-    free = jnp.isnan(aspect) if method == "bundle" else jnp.asarray(method == "IIa")
+    :class:`sorjax._bundle.BundleOut` and its views' scores, ``free`` the same of the
+    free-aspect fit; ``linear``: ``(K, omega, ok, cov_unit)``)."""
+    free_aspect = jnp.isnan(aspect) if method == "bundle" else jnp.asarray(method == "IIa")
     used, n_used, all_inf, radius, rms_u = c.used, c.n_used, c.all_inf, c.radius, c.rms_u
     if bundle is not None:
-        out = bundle
+        out, scores = bundle
         K, omega, ok = out.K, out.omega, out.ok
-        cov = out.cov
+        checks, cov = _model_checks(out, scores, free, aspect, c, options)
         s_px = jnp.sqrt(out.s2)
         cov_unit = cov / jnp.maximum(s_px, 1e-300) ** 2
         persp_ok, g_px, z = perspective_gate(out.evidence, out.n, s_px, options)
@@ -194,10 +263,11 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
         code = RESULTS.where(ok, RESULTS.successful,
                              RESULTS.degenerate if method == "I" else RESULTS.not_positive_definite)
         assessed = ok & finite & (K[0, 0] > 0) & (K[1, 1] > 0)
+        checks = _no_checks(aspect, c, options)
 
     est = jnp.stack([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
     verdict = assess(est, cov_unit, s_px, jnp.sqrt(jnp.sum(jnp.where(used, radius**2, 0.0)) / jnp.maximum(n_used, 1)),
-                     outline_extent(points, used), image_size, free, all_inf, persp_ok, options)
+                     outline_extent(points, used), image_size, free_aspect, all_inf, persp_ok, options)
     determined = verdict.determined & assessed
     success = code == RESULTS.successful
 
@@ -217,6 +287,13 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
     success = code == RESULTS.successful
     K_out = jnp.where(success | partial, K_out, _nan((3, 3)))
     omega = jnp.where(success, omega, _nan((3, 3)))
+
+    # a model the outlines contradict (a wrong known aspect ratio, views of another
+    # camera or of no surface of revolution): refused, whatever the estimate
+    contradicted = (checks.verdict == MODEL_CONTRADICTED) & (success | partial)
+    code = RESULTS.where(contradicted, RESULTS.inconsistent, code)
+    K_out = jnp.where(contradicted, _nan((3, 3)), K_out)
+    omega = jnp.where(contradicted, _nan((3, 3)), omega)
 
     code = RESULTS.where(pp_only, RESULTS.where(pp_found, RESULTS.only_principal_point, RESULTS.degenerate), code)
     K_out = jnp.where(pp_only, K_pp, K_out)
@@ -238,7 +315,7 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
         cost=jnp.asarray(cost, jnp.float64), s_px=s_px, steps=jnp.asarray(steps, jnp.int32), used=used,
         drop_reason=c.drop, view_rms=view_rms, v_x=vx, l_s=ls, all_at_infinity=all_inf,
         perspective_px=jnp.asarray(g_px, jnp.float64), perspective_z=jnp.asarray(z, jnp.float64),
-        perspective_ok=jnp.asarray(persp_ok), axes_spread_deg=spread,
+        perspective_ok=jnp.asarray(persp_ok), axes_spread_deg=spread, checks=checks,
     )
 
 

@@ -63,6 +63,17 @@ class Options(eqx.Module):
     * ``perspective_z``, ``perspective_factor``: the focal length is determined only
       when the best camera with no perspective fits worse by a z-score of at least
       ``perspective_z`` and by at least ``perspective_factor * outline_error_px`` RMS.
+
+    Model checks (:mod:`sorjax.core._checks`):
+
+    * ``consistency_z``: a known aspect ratio is rejected when the free-aspect bundle
+      puts it this many standard deviations away (Wald).
+    * ``consistency_p``: the views are inconsistent with one camera when the score
+      statistic of releasing every view's homology has a chi-square p-value below this.
+    * ``duplicate_px``: an outline within this RMS distance (px) of an earlier one is
+      the same view twice.
+    * ``check_floor_px``: evidence below this RMS per sample (px) never fails a check:
+      the numerical floor of the distance fields (exact outlines fit to < 4e-5 px).
     """
 
     n_samples: int = eqx.field(static=True, default=100)
@@ -91,3 +102,7 @@ class Options(eqx.Module):
     outline_error_px: float = 0.1
     perspective_z: float = 3.0
     perspective_factor: float = 3.0
+    consistency_z: float = 4.0
+    consistency_p: float = 1e-4
+    duplicate_px: float = 0.25
+    check_floor_px: float = 1e-3

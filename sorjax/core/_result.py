@@ -11,6 +11,8 @@ from __future__ import annotations
 import equinox as eqx
 from jaxtyping import Array, Bool, Float, Int
 
+from ._checks import ModelChecks
+
 
 class RESULTS(eqx.Enumeration):
     """Result codes of a calibration (in the style of ``optimistix.RESULTS``).
@@ -39,6 +41,12 @@ class RESULTS(eqx.Enumeration):
         "views with a finite vanishing point, parallel constraint lines, or a direction "
         "of the intrinsics the views leave free). Add views with the object placed "
         "elsewhere in the image or tilted differently."
+    )
+    inconsistent = (
+        "The outlines contradict the camera model: no single zero-skew pinhole camera "
+        "explains them to within their noise and the declared outline error (a wrong "
+        "known parameter, views taken by different cameras or zoom settings, or an "
+        "outline that is not a surface of revolution)."
     )
     only_principal_point = (
         "The views determine the principal point but not the focal length: in every view "
@@ -80,6 +88,8 @@ class CoreResult(eqx.Module):
             the linear methods), px RMS per sample and as a z-score.
         perspective_ok: the evidence passes the gate (True for the linear methods).
         axes_spread_deg: largest angle between the used imaged axes.
+        checks: the model checks' statistics (:class:`sorjax.core._checks.ModelChecks`;
+            run on the bundle's estimate: a linear method's has none but the duplicates).
     """
 
     K: Float[Array, "3 3"]
@@ -105,6 +115,7 @@ class CoreResult(eqx.Module):
     perspective_z: Float[Array, ""]
     perspective_ok: Bool[Array, ""]
     axes_spread_deg: Float[Array, ""]
+    checks: ModelChecks
 
     @property
     def success(self):

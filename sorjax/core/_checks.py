@@ -1,0 +1,192 @@
+"""Model checks: does one zero-skew pinhole camera explain every view?
+
+The bundle's covariance is a statement about noise *given the model*.  When the model
+is wrong -- a known aspect ratio that is not the camera's, views taken by two cameras
+(a zoom change, a cropped image), an outline that is not a surface of revolution, the
+same view passed twice -- the bundle still finds a best fit and a small standard
+deviation, far from the truth.  These checks test the model against the outlines
+before a K is called determined.  Pure functions of arrays; the messages are written
+at the edge (:mod:`sorjax._calibration`).
+
+1. **Fixed parameters** (:func:`fixed_aspect_check`).  With a known aspect ratio
+   ``a0`` the free-aspect bundle is fitted too and the Wald statistic
+   ``z = |a_free - a0| / std(a_free)`` computed from its (correlated-noise, sandwich)
+   covariance; ``g = sqrt((C_fixed - C_free) / n)`` px is the same evidence as an RMS
+   per sample.  The known value is *contradicted* when ``z >= consistency_z`` and ``g
+   >= perspective_factor * outline_error_px`` (neither the noise nor the declared
+   systematic outline error explains the difference), *not confirmed* when only the
+   noise fails to explain it (the covariance then grows by ``d d^T``, ``d`` the
+   difference between the fixed and the free estimates of ``(fu, fv, u0, v0)``).
+2. **Consistency of the views** (:func:`view_scores`).  Each view's homology is
+   released from the pole-polar constraint (its axis and its vertex free: 4
+   parameters instead of 2) and the score (Lagrange multiplier) statistic of that
+   release is computed at the joint optimum, ``S_j = g_j^T M_j^+ g_j`` with ``g_j =
+   J_j^T r_j`` and ``M_j`` the correlated-noise covariance of ``g_j`` (the bundle's
+   own model of eq. 20's correlations, :func:`sorjax._bundle._correlated_meat`).  No
+   extra solve: one Jacobian of 4 columns per view.  ``S = sum_j S_j`` is compared
+   with a chi-square of ``2 V - 4`` degrees of freedom (``2 V - 3`` with a known
+   aspect ratio); ``delta_j = g_j^T (J_j^T J_j)^+ g_j`` (px^2, one Gauss-Newton step's
+   decrease of the cost) gives the evidence per sample in px.  Inconsistent views are
+   *contradicted* when the evidence also exceeds ``perspective_factor *
+   outline_error_px`` RMS; otherwise the covariance is scaled by the Birge ratio
+   ``S / dof`` (the views disagree beyond their noise: the noise-only covariance is too
+   small by that factor).
+3. **Duplicated views** (:func:`duplicate_views`): an outline within
+   ``duplicate_px`` RMS of an earlier one is the same view twice (it would shrink the
+   standard deviations by sqrt(2) while adding no information): dropped.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax.scipy.special import gammaincc
+from jaxtyping import Array, Bool, Float, Int
+
+from .._bundle import _correlated_meat, foot_parameters, make_problem, pole_polar_pairs
+from .._homology import symmetry_residuals
+from ._options import Options
+
+# ModelChecks.verdict
+MODEL_OK, MODEL_WIDENED, MODEL_CONTRADICTED = 0, 1, 2
+# ModelChecks.culprit: which check decided the verdict
+NO_CULPRIT, CULPRIT_ASPECT, CULPRIT_VIEWS = 0, 1, 2
+
+
+class ModelChecks(eqx.Module):
+    """The statistics of the model checks of one calibration (arrays; a batch stacks).
+
+    Attributes:
+        outline_error_px: the systematic outline error the checks and the perspective
+            gate allowed for (px).
+        aspect_fixed: the known ``fu / fv`` that was imposed (NaN: free).
+        aspect_free: ``fu / fv`` of the free-aspect bundle (NaN unless a known aspect
+            ratio was checked); ``aspect_free_std`` its standard deviation.
+        aspect_z: ``|aspect_free - aspect_fixed| / aspect_free_std`` (Wald).
+        aspect_px: ``sqrt((C_fixed - C_free) / n)``, px RMS per sample.
+        view_score: (V,) each view's score statistic ``S_j`` (NaN: not used).
+        view_px: (V,) each view's evidence ``sqrt(delta_j / n_j)``, px RMS per sample.
+        consistency_p: the p-value of ``S = sum_j S_j`` against a chi-square of
+            ``consistency_dof`` degrees of freedom (NaN with no degree of freedom).
+        consistency_px: ``sqrt(sum_j delta_j / n)``, px RMS per sample.
+        inflation: the factor the covariance was scaled by (1: none).
+        verdict: ``MODEL_OK``, ``MODEL_WIDENED`` (not confirmed: the uncertainty
+            includes the model's doubt) or ``MODEL_CONTRADICTED`` (refused).
+        culprit: ``NO_CULPRIT``, ``CULPRIT_ASPECT`` or ``CULPRIT_VIEWS``.
+        duplicate_of: (V,) the earlier view each view duplicates (-1: none).
+    """
+
+    outline_error_px: Float[Array, ""]
+    aspect_fixed: Float[Array, ""]
+    aspect_free: Float[Array, ""]
+    aspect_free_std: Float[Array, ""]
+    aspect_z: Float[Array, ""]
+    aspect_px: Float[Array, ""]
+    view_score: Float[Array, " V"]
+    view_px: Float[Array, " V"]
+    consistency_dof: Int[Array, ""]
+    consistency_p: Float[Array, ""]
+    consistency_px: Float[Array, ""]
+    inflation: Float[Array, ""]
+    verdict: Int[Array, ""]
+    culprit: Int[Array, ""]
+    duplicate_of: Int[Array, " V"]
+
+
+def duplicate_views(points: Float[Array, "V M 2"], valid: Bool[Array, " V"], options: Options) -> Int[Array, " V"]:
+    """Per view, the first earlier valid view whose outline lies within
+    ``options.duplicate_px`` (RMS, px, both ways) of its own, else -1.  The distance is
+    from each point to the other outline's nearest point (outlines of ``M`` evenly
+    spaced points: a resampled copy of an outline is within its spacing squared)."""
+    V = points.shape[0]
+
+    def nn_rms(p, q):
+        d2 = jnp.sum((p[:, None, :] - q[None, :, :]) ** 2, -1)
+        return jnp.sqrt(jnp.mean(jnp.min(d2, axis=1)))
+
+    d = jax.vmap(lambda p: jax.vmap(lambda q: jnp.maximum(nn_rms(p, q), nn_rms(q, p)))(points))(points)
+    i, j = jnp.arange(V)[:, None], jnp.arange(V)[None, :]
+    same = (d <= options.duplicate_px) & (j < i) & valid[:, None] & valid[None, :]
+    return jnp.where(jnp.any(same, axis=1), jnp.argmax(same, axis=1), -1).astype(jnp.int32)
+
+
+def view_scores(y, points_n, used, inliers, aspect, T, options: Options):
+    """Score statistics of releasing each view's homology from the pole-polar
+    constraint at the bundle's optimum ``y`` (normalised by ``T``); see the module's
+    docstring.  Returns ``(S (V,), delta_px2 (V,), n (V,))``: the statistics
+    (dimensionless), one Gauss-Newton step's decrease of each view's cost (px^2) and
+    each view's number of samples counted (sum of weights); NaN / 0 for views not
+    used."""
+    problem = make_problem(points_n, options.n_samples, aspect, inliers, used)
+    feet = foot_parameters(y, problem)
+    v, l = pole_polar_pairs(y, problem)
+    V, N = problem.samples.shape[:2]
+
+    def basis(v):  # two unit vectors orthogonal to v (and to each other)
+        e = jnp.eye(3)[jnp.argmin(jnp.abs(v))]
+        b1 = jnp.cross(v, e)
+        b1 = b1 / jnp.linalg.norm(b1)
+        return b1, jnp.cross(v, b1)
+
+    def res(p, v, l, s, f, w, h):
+        th, rho = jnp.arctan2(l[1], l[0]) + p[0], -l[2] / jnp.linalg.norm(l[:2]) + p[1]
+        b1, b2 = basis(v)
+        lp = jnp.stack([jnp.cos(th), jnp.sin(th), -rho])
+        return symmetry_residuals(v + p[2] * b1 + p[3] * b2, lp, s, f, w, h)
+
+    zero = jnp.zeros(4)
+    r = jax.vmap(lambda *a: res(zero, *a))(v, l, problem.samples, problem.fields, problem.weights, feet)  # (V, N)
+    J = jax.vmap(lambda *a: jax.jacfwd(res)(zero, *a))(v, l, problem.samples, problem.fields, problem.weights, feet)
+    n = jnp.sum(problem.weights, axis=1)
+    n_par = jnp.sum(used) * 2 + jnp.where(jnp.isnan(aspect), 4, 3)
+    s2 = jnp.sum(r**2) / jnp.maximum(jnp.sum(n) - n_par, 1.0)
+    # the block-diagonal Jacobian of all views' releases, (V N, 4 V), for the meat
+    G = (J[:, :, None, :] * jnp.eye(V)[:, None, :, None]).reshape(V * N, V * 4)
+    meat = _correlated_meat(G, r.reshape(-1), feet, problem, s2)
+    g = jnp.einsum("vnk,vn->vk", J, r)
+    blocks = jax.vmap(lambda i: jax.lax.dynamic_slice(meat, (4 * i, 4 * i), (4, 4)))(jnp.arange(V))
+    S = jax.vmap(lambda gi, Mi: gi @ jnp.linalg.pinv(Mi, hermitian=True) @ gi)(g, blocks)
+    JtJ = jnp.einsum("vnk,vnm->vkm", J, J)
+    delta = jax.vmap(lambda gi, Hi: gi @ jnp.linalg.pinv(Hi, hermitian=True) @ gi)(g, JtJ) / T[0, 0] ** 2
+    return jnp.where(used, S, jnp.nan), jnp.where(used, delta, jnp.nan), jnp.where(used, n, 0.0)
+
+
+def consistency(S, delta_px2, n, used, aspect, options: Options):
+    """``(dof, p, g_px, rejected, beyond_error, birge)`` of the views' consistency:
+    ``S = sum_j S_j`` against a chi-square of ``dof = 2 V - 4`` (``- 3`` with a known
+    aspect ratio) degrees of freedom; ``rejected`` when ``p < consistency_p``;
+    ``beyond_error`` when also ``g_px = sqrt(sum delta / n) >= perspective_factor *
+    outline_error_px``; ``birge = S / dof``.  Evidence below ``check_floor_px``
+    (numerical) never rejects."""
+    dof = 2 * jnp.sum(used) - jnp.where(jnp.isnan(aspect), 4, 3)
+    St = jnp.sum(jnp.where(used, S, 0.0))
+    p = jnp.where(dof > 0, gammaincc(jnp.maximum(dof, 1) / 2.0, St / 2.0), jnp.nan)
+    g = jnp.sqrt(jnp.sum(jnp.where(used, delta_px2, 0.0)) / jnp.maximum(jnp.sum(n), 1.0))
+    rejected = (dof > 0) & (p < options.consistency_p) & (g >= options.check_floor_px)
+    beyond = rejected & (g >= options.perspective_factor * options.outline_error_px)
+    return dof.astype(jnp.int32), p, g, rejected, beyond, St / jnp.maximum(dof, 1)
+
+
+def aspect_of(K, cov):
+    """``fu / fv`` and its standard deviation (delta method) from ``K`` (px) and the
+    covariance of ``(fu, fv, u0, v0)`` (px^2)."""
+    a = K[0, 0] / K[1, 1]
+    grad = jnp.array([1.0 / K[1, 1], -a / K[1, 1]])
+    var = grad @ cov[:2, :2] @ grad
+    return a, jnp.sqrt(jnp.where(jnp.isfinite(var), jnp.maximum(var, 0.0), jnp.inf))
+
+
+def fixed_aspect_check(aspect, fixed_K, fixed_cost, free_K, free_cov, free_cost, free_ok, n, options: Options):
+    """``(a_free, a_std, z, g_px, rejected, beyond_error)`` of a known aspect ratio
+    ``aspect`` (NaN: nothing to check; every result False / NaN) against the free
+    fit; see the module's docstring."""
+    checked = jnp.isfinite(aspect) & free_ok
+    a_free, a_std = aspect_of(free_K, free_cov)
+    z = jnp.abs(a_free - aspect) / jnp.maximum(a_std, 1e-300)
+    g = jnp.sqrt(jnp.maximum(fixed_cost - free_cost, 0.0) / jnp.maximum(n, 1.0))
+    rejected = checked & (z >= options.consistency_z) & (g >= options.check_floor_px)
+    beyond = rejected & (g >= options.perspective_factor * options.outline_error_px)
+    nan = jnp.asarray(jnp.nan)
+    return (jnp.where(checked, a_free, nan), jnp.where(checked, a_std, nan), jnp.where(checked, z, nan),
+            jnp.where(checked, g, nan), rejected, beyond)
