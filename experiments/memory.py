@@ -13,9 +13,9 @@ child.)  Cases, on SIZE x SIZE px (default 20000):
   label-u16    a uint16 label image with two discs (labels 1 and 2), label=2
   image-boxes  outlines_from_image on a uint8 BGR photograph, one disc (radius 300 px) in a box
   image-auto   the same, one disc of radius 0.03 SIZE (600 px) found automatically
-  cli-mask     ``sorjax calibrate IMAGE --masks MASK`` on PNG files (uint8 BGR image,
-               8-bit mask) holding two discs: reading, extraction, the (failed: discs are
-               conics) calibration
+  cli-mask     ``sorjax calibrate IMAGE --masks MASK --out camera.yaml`` on PNG files
+               (uint8 BGR image, 8-bit mask) holding two discs: reading, extraction, the
+               (failed: discs are conics) calibration, the overlay
 
 The issue's bound: under 2 GB for a 20000 x 20000 mask holding one small object.
 
@@ -112,7 +112,8 @@ def child(case: str, size: int, files: list[str]) -> dict:
 
             err = io.StringIO()
             with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
-                code = main(["calibrate", files[0], "--masks", files[1]])
+                code = main(["calibrate", files[0], "--masks", files[1], "--out",
+                             os.path.join(os.path.dirname(files[0]), "camera.yaml")])
             return [code, err.getvalue().strip().splitlines()[-1:]]
     else:
         raise SystemExit(f"unknown case {case}")

@@ -244,7 +244,9 @@ def _views_from_images(args, labels: list[str]):
     boxes = _read_boxes(args.boxes, args.outlines)
     outlines, sources, images, size = [], [], [], None
     for k, f in enumerate(args.outlines):
-        img = _read_image(f, cv2.IMREAD_COLOR)
+        # with a mask the photograph is read for its size only: grey (a third of colour; OpenCV's reader
+        # holds about twice its output while decoding)
+        img = _read_image(f, cv2.IMREAD_GRAYSCALE if args.masks else cv2.IMREAD_COLOR)
         h, w = img.shape[:2]
         if size is None:
             size = (w, h)
@@ -273,6 +275,29 @@ def _views_from_images(args, labels: list[str]):
             outlines.append(o)
             sources.append(f"{labels[k]}#{j}")
     return outlines, sources, images, size
+
+
+OVERLAY_MAX_SIDE = 8192  # px: a larger photograph's overlay is drawn on it read grey at 1/2, 1/4 or 1/8 of its size
+
+
+def _overlay(f: str, views, png: Path, size) -> None:
+    """Draw the overlay of image ``f`` (``views`` in its pixels, as for
+    :func:`sorjax._camera_io.draw_overlay`) into ``png``; an image larger than
+    ``OVERLAY_MAX_SIDE`` is read grey and reduced by OpenCV and the views scaled to it
+    (OpenCV decodes the whole image whatever the reduction: a 20000 x 20000 photograph
+    costs 2.3 GB in colour, 0.4 GB grey)."""
+    import cv2
+
+    from ._camera_io import draw_overlay
+
+    k = next((k for k in (1, 2, 4) if max(size) / k <= OVERLAY_MAX_SIDE), 8)
+    flag = {1: cv2.IMREAD_COLOR, 2: cv2.IMREAD_REDUCED_GRAYSCALE_2, 4: cv2.IMREAD_REDUCED_GRAYSCALE_4,
+            8: cv2.IMREAD_REDUCED_GRAYSCALE_8}[k]
+    if k > 1:  # pixel centres: x' = (x + 0.5) / k - 0.5
+        S = np.array([[1.0 / k, 0.0, 0.5 / k - 0.5], [0.0, 1.0 / k, 0.5 / k - 0.5], [0.0, 0.0, 1.0]])
+        ST = np.linalg.inv(S).T
+        views = [((np.asarray(o) + 0.5) / k - 0.5, ST @ l, S @ v, lab) for o, l, v, lab in views]
+    draw_overlay(_read_image(f, flag), views, png)
 
 
 def _number_arg(lo: float, lo_open: bool, what: str):
@@ -312,7 +337,7 @@ _nonnegative = _number_arg(0.0, False, "")
 def _calibrate(args) -> int:
     import sorjax
 
-    from ._camera_io import draw_overlay, write_camera
+    from ._camera_io import write_camera
 
     is_image = [Path(f).suffix.lower() in IMAGE_SUFFIXES for f in args.outlines]
     if any(is_image) and not all(is_image):
@@ -343,14 +368,12 @@ def _calibrate(args) -> int:
         r = rms.get(i, float(cal.homologies[i].rms))
         print(f" {i:4d}  {src if len(src) <= 30 else '...' + src[-27:]:30s}  {r:17.3f}  {status}")
     if plan is not None and images:
-        import cv2
-
         for (f, first, n), png in zip(images, plan[2]):
             views = []
             for i in range(first, first + n):
                 h = cal.homologies[i]
                 views.append((outlines[i], np.asarray(h.l_s), np.asarray(h.v_x), f"{i}" + ("" if i in used else " (dropped)")))
-            draw_overlay(_read_image(f, cv2.IMREAD_COLOR), views, png)
+            _overlay(f, views, png, size)
     if not cal.success:
         print(f"calibration failed: {cal.message}", file=sys.stderr)
         if getattr(cal, "details", ""):

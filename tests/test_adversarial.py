@@ -198,6 +198,19 @@ def test_two_images_of_one_name_get_two_overlays_each_with_its_own_outlines(tmp_
     assert len({v["source"] for v in twin["views"]}) == 2
 
 
+def test_the_overlay_of_a_large_photograph_is_drawn_reduced(tmp_path, stub_calibrate, monkeypatch):
+    """Above OVERLAY_MAX_SIDE px the overlay is drawn on the photograph read grey at 1/2,
+    1/4 or 1/8 of its size (memory), the outlines scaled to it."""
+    monkeypatch.setattr("sorjax.cli.OVERLAY_MAX_SIDE", 150)  # the 300 px wide photo: drawn at 1/2
+    img = _photo(tmp_path / "img.png", centre=(220.0, 100.0))
+    cv2.imwrite(str(tmp_path / "mask.png"), _disc_mask(centre=(220.0, 100.0)))
+    assert main(["calibrate", img, "--masks", str(tmp_path / "mask.png"), "--out", str(tmp_path / "cam.yaml")]) == 0
+    over = cv2.imread(str(tmp_path / "cam_overlay_img.png"))
+    assert over.shape == (100, 150, 3)
+    green = (over[:, :, 1] > 150) & (over[:, :, 0] < 100) & (over[:, :, 2] < 100)
+    assert abs(np.median(np.nonzero(green)[1]) - (220.5 / 2 - 0.5)) < 8
+
+
 def test_write_errors_after_the_check_are_one_line(tmp_path, stub_calibrate, capsys, monkeypatch):
     """A disk that fills up (or a folder removed) between the check and the write."""
     o = scenes.two_spheres(f=700.0).outlines
