@@ -94,20 +94,36 @@ class ModelChecks(eqx.Module):
     duplicate_of: Int[Array, " V"]
 
 
+DUPLICATE_PROBES = 128  # points of each outline whose distance to the other outline is measured
+
+
 def duplicate_views(points: Float[Array, "V M 2"], valid: Bool[Array, " V"], options: Options) -> Int[Array, " V"]:
     """Per view, the first earlier valid view whose outline lies within
     ``options.duplicate_px`` (RMS, px, both ways) of its own, else -1.  The distance is
-    from each point to the other outline's nearest point (outlines of ``M`` evenly
-    spaced points: a resampled copy of an outline is within its spacing squared)."""
-    V = points.shape[0]
+    from ``DUPLICATE_PROBES`` evenly spread points of each outline to the other
+    outline's nearest point (outlines of ``M`` evenly spaced points: a resampled copy
+    of an outline is within about its spacing)."""
+    V, M = points.shape[:2]
+    i, j = jnp.arange(V)[:, None], jnp.arange(V)[None, :]
+    pairs = (j < i) & valid[:, None] & valid[None, :]
+    # cheap screen: a duplicate has (nearly) the same centroid and RMS radius
+    c = jnp.mean(points, axis=1)
+    rad = jnp.sqrt(jnp.mean(jnp.sum((points - c[:, None]) ** 2, -1), -1))
+    near = 10.0 * options.duplicate_px
+    cand = pairs & (jnp.linalg.norm(c[:, None] - c[None, :], axis=-1) <= near) & (
+        jnp.abs(rad[:, None] - rad[None, :]) <= near)
+    sub = points[:, :: max(1, M // DUPLICATE_PROBES)]  # probes: every k-th point, to every point of the other
 
     def nn_rms(p, q):
         d2 = jnp.sum((p[:, None, :] - q[None, :, :]) ** 2, -1)
         return jnp.sqrt(jnp.mean(jnp.min(d2, axis=1)))
 
-    d = jax.vmap(lambda p: jax.vmap(lambda q: jnp.maximum(nn_rms(p, q), nn_rms(q, p)))(points))(points)
-    i, j = jnp.arange(V)[:, None], jnp.arange(V)[None, :]
-    same = (d <= options.duplicate_px) & (j < i) & valid[:, None] & valid[None, :]
+    def distances():
+        return jax.vmap(lambda ps, p: jax.vmap(lambda qs, q: jnp.maximum(nn_rms(ps, q), nn_rms(qs, p)))(sub, points))(
+            sub, points)
+
+    d = jax.lax.cond(jnp.any(cand), distances, lambda: jnp.full((V, V), jnp.inf))
+    same = cand & (d <= options.duplicate_px)
     return jnp.where(jnp.any(same, axis=1), jnp.argmax(same, axis=1), -1).astype(jnp.int32)
 
 
