@@ -11,6 +11,7 @@ compiled program.
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 
@@ -25,7 +26,7 @@ from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
 from ._outline import DEFAULT_POINTS, as_outlines, implied_outline_error
 from .core._assess import ASYMMETRIC, COLLAPSED_FOCAL, CONIC, DUPLICATE, MASKED, PP_OUTSIDE, TRIMMED, USED, WIDE_FOV
 from .core._checks import CULPRIT_ASPECT, CULPRIT_VIEWS, MODEL_CONTRADICTED, MODEL_WIDENED, ModelChecks
-from .core._calibrate import calibrate_methods
+from .core._calibrate import calibrate_homologies, calibrate_methods
 from .core._options import Options
 from .core._result import RESULTS
 from .core._viewfit import ViewHomologies
@@ -74,11 +75,19 @@ class Calibration(eqx.Module):
             ``sqrt(delta cost / s^2)`` (a z-score against "no perspective").
         outline_error: the outline error allowed for (px): the declared one, or more
             when the coordinates show it (whole-pixel or mask-staircase outlines).
+        distortion_model: "none", "k1" or "k1k2" (``calibrate(distortion=...)``).
+        distortion: OpenCV's radial coefficients ``(k1,)`` or ``(k1, k2)`` (camera-
+            normalised coordinates, as ``cv2.undistort`` takes them); NaN when the
+            outlines did not determine them; None for a pinhole.  ``distortion_std``:
+            their standard deviations.
         checks: the model checks' statistics (:class:`sorjax.core.ModelChecks`): a
             known aspect ratio against the free fit, the views' consistency with one
             camera, duplicated views.  ``RESULTS.inconsistent`` when the outlines
             contradict the model; the standard deviations widened (and a warning) when
             the model is only not confirmed.
+        fixed_principal_point, fixed_focal_length: the intrinsics held fixed
+            (``calibrate(principal_point=..., focal_length=...)``; px), None when
+            estimated.  Their standard deviations are 0.
     """
 
     K: Float[Array, "3 3"]
@@ -101,6 +110,11 @@ class Calibration(eqx.Module):
     perspective_z: float = eqx.field(static=True, default=math.nan)
     outline_error: float = eqx.field(static=True, default=math.nan)
     checks: ModelChecks | None = None
+    distortion_model: str = eqx.field(static=True, default="none")
+    distortion: Float[Array, " n"] | None = None
+    distortion_std: Float[Array, " n"] | None = None
+    fixed_principal_point: tuple[float, float] | None = eqx.field(static=True, default=None)
+    fixed_focal_length: float | None = eqx.field(static=True, default=None)
 
     @property
     def std(self) -> np.ndarray:
@@ -139,6 +153,49 @@ class Calibration(eqx.Module):
 
     def __array__(self, dtype=None, copy=None):
         return np.asarray(self.K, dtype=dtype)
+
+
+def _is_number(x) -> bool:
+    return not isinstance(x, (bool, np.bool_)) and isinstance(x, (int, float, np.integer, np.floating))
+
+
+def _check_fixed(principal_point, focal_length, image_size, method: str):
+    """``(pp, f)``: the fixed principal point ``(cx, cy)`` px (or None) and focal
+    length px (or None), validated (``image_size`` already checked: ``(w, h)`` or
+    None)."""
+    pp = None
+    if principal_point is not None:
+        if isinstance(principal_point, str):
+            if principal_point not in ("centre", "center"):
+                raise ValueError(f"principal_point must be (cx, cy) in pixels or 'centre' (the command line's "
+                                 f"--principal-point CX CY or --centre-principal-point); got {principal_point!r}.")
+            if image_size is None:
+                raise ValueError("principal_point='centre' needs image_size=(width, height) (the command line "
+                                 "reads it from the images; with outline files give --principal-point CX CY).")
+            pp = ((image_size[0] - 1) / 2.0, (image_size[1] - 1) / 2.0)
+        else:
+            try:
+                xs = tuple(principal_point)
+            except TypeError:
+                xs = ()
+            if len(xs) != 2 or not all(_is_number(x) and math.isfinite(x) for x in xs):
+                raise ValueError(f"principal_point must be (cx, cy), two finite numbers of pixels, or 'centre' (the "
+                                 f"command line's --principal-point CX CY or --centre-principal-point); got "
+                                 f"{principal_point!r}.")
+            pp = (float(xs[0]), float(xs[1]))
+            if max(abs(pp[0]), abs(pp[1])) > 1e7:
+                raise ValueError(f"principal_point {pp!r} is beyond 1e7 px (outlines are limited to that).")
+    f = None
+    if focal_length is not None:
+        if not _is_number(focal_length) or not (math.isfinite(focal_length) and 0 < focal_length <= 1e9):
+            raise ValueError(f"focal_length must be a positive finite number of pixels (fv; the command line's "
+                             f"--focal F); got {focal_length!r}.")
+        f = float(focal_length)
+    if (pp is not None or f is not None) and method != "bundle":
+        which = "principal_point" if pp is not None else "focal_length"
+        raise ValueError(f"{which} is held fixed by the bundle only; use method='bundle' (the default) instead of "
+                         f"{method!r} (the command line's --method).")
+    return pp, f
 
 
 def _check_method(method: str, aspect_ratio):
@@ -489,6 +546,23 @@ def _views_text(ch) -> str:
             + _worst_views(ch))
 
 
+def distortion_notes(r, distortion: str, outline_error: float) -> list[str]:
+    """The warning of a distortion model the outlines do not support (the
+    distortion-free K returned, its std widened), from the core's result ``r``."""
+    if distortion == "none" or np.all(np.isfinite(np.asarray(r.distortion))):
+        return []
+    g, z = float(r.distortion_px), float(r.distortion_z)
+    o = Options()
+    why = (f"noise alone could do (needs z >= {o.perspective_z:g})" if not z >= o.perspective_z else
+           f"a systematic outline error of {float(outline_error):g} px (outline_error) could do (needs >= "
+           f"{o.perspective_factor * float(outline_error):.2g} px)")
+    return [f"distortion={distortion!r}: the outlines do not determine the radial distortion: the fit without it is "
+            f"only {g:.2g} px RMS worse (z = {z:.2g}), which {why}. Returned: the distortion-free K, its standard "
+            "deviations widened by the difference to the fit with distortion (the outlines cannot tell distortion "
+            "from a change of focal length), and NaN coefficients. Add views with objects near the image's edges "
+            "and corners, where distortion is strongest."]
+
+
 def model_notes(r, outline_error: float) -> list[str]:
     """The warning of a calibration whose model the outlines do not confirm (the
     uncertainty widened: :mod:`sorjax.core._checks`), from the core's result ``r``."""
@@ -510,8 +584,9 @@ def model_notes(r, outline_error: float) -> list[str]:
     return notes
 
 
-def details_for(r, h, points, method: str, a, outline_error: float, image_size=None) -> str:
-    """What is specific to a result that is not a plain success (``Calibration.details``)."""
+def details_for(r, h, points, method: str, a, outline_error: float, image_size=None, fixed_pp=None) -> str:
+    """What is specific to a result that is not a plain success (``Calibration.details``);
+    ``fixed_pp``: the principal point held fixed (px) or None."""
     name = code_name(r.result)
     if name == "inconsistent":
         ch = r.checks
@@ -529,8 +604,19 @@ def details_for(r, h, points, method: str, a, outline_error: float, image_size=N
     vs = ", ".join(str(i) for i in used)
     if name == "too_few_views":
         why = "; ".join(f"view {i}: {reason}" for i, reason in dropped_views(h, drop))
+        if fixed_pp is not None:
+            return (f"{len(drop)} views given, {len(used)} usable ({why}). With the principal point fixed one view "
+                    "is enough, but none is left.")
         return (f"{len(drop)} views given, {len(used)} usable ({why}). A single view gives only two "
-                "constraints on the four intrinsics.")
+                "constraints on the four intrinsics; fix the principal point (principal_point=, the command "
+                "line's --principal-point / --centre-principal-point) to calibrate from one view.")
+    if fixed_pp is not None and name == "degenerate" and bool(r.all_at_infinity):
+        return (f"The principal point is fixed at ({fixed_pp[0]:.1f}, {fixed_pp[1]:.1f}) px and in every view used "
+                f"(views {vs}) v_x is at infinity: the imaged axis l_s passes through the principal point (the "
+                "object's axis and the optical axis lie in one plane: the object on a line through the image's "
+                "principal point, or the camera looking straight at its axis). The pole-polar relation "
+                "omega v_x ~ l_s then holds for every focal length, so the focal length is not determined. Add "
+                "(or use instead) a view with the object away from the principal point, seen from above or below.")
     if bool(r.all_at_infinity) and name in ("only_principal_point", "degenerate") and not np.any(r.determined):
         K = np.asarray(r.K)
         if not np.all(np.isfinite(K[:2, 2])):
@@ -602,23 +688,39 @@ _SHELL_METHODS = ("I", "IIa", "IIb", "bundle")
 
 
 @jax.jit
-def _core(points, homs, aspect, options, image_size, valid):
+def _core(points, homs, aspect, options, image_size, valid, fixed=None):
     """Every method at once (:func:`sorjax.core.calibrate_methods`): one compiled
     program per padded view count serves all four, at the run-time cost of the three
-    cheap linear methods (a few ms) beside the one asked for."""
+    cheap linear methods (a few ms) beside the one asked for.  ``fixed``: intrinsics
+    held fixed (px, NaN: free) or None (another compiled program: the one of a free
+    camera stays as it was)."""
     return calibrate_methods(points, homs, _SHELL_METHODS, jnp.stack([aspect] * len(_SHELL_METHODS)), options=options,
-                             image_size=image_size, valid=valid)
+                             image_size=image_size, valid=valid, fixed=fixed)
 
 
-def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, options: Options, image_size):
+@functools.partial(jax.jit, static_argnames=("distortion",))
+def _core_distorted(points, homs, aspect, options, image_size, valid, distortion, fixed=None):
+    """The bundle with radial distortion (``distortion`` "k1" or "k1k2")."""
+    return calibrate_homologies(points, homs, "bundle", aspect, options=options, image_size=image_size, valid=valid,
+                                distortion=distortion, fixed=fixed)
+
+
+def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, options: Options, image_size,
+              distortion: str = "none", fixed=None):
     """The core on ``V`` views padded to :func:`_bucket` (copies of view 0, masked);
-    returns the result of ``method`` as numpy, cut back to ``V`` views."""
+    returns the result of ``method`` as numpy, cut back to ``V`` views.  ``fixed``
+    (4,) ``(fu, fv, u0, v0)`` px held fixed (NaN: free), or None."""
     V = points.shape[0]
     B = _bucket(V)
     pad = lambda x: np.concatenate([x, np.repeat(x[:1], B - V, axis=0)]) if B > V else x  # noqa: E731
     valid = np.arange(B) < V
-    r = _core(pad(points), jax.tree_util.tree_map(pad, homs), np.float64(aspect), options,
-              np.asarray(image_size, np.float64), valid)[_SHELL_METHODS.index(method)]
+    args = (pad(points), jax.tree_util.tree_map(pad, homs), np.float64(aspect), options,
+            np.asarray(image_size, np.float64), valid)
+    fixed = None if fixed is None else np.asarray(fixed, np.float64)
+    if distortion == "none":
+        r = _core(*args, fixed)[_SHELL_METHODS.index(method)]
+    else:
+        r = _core_distorted(*args, distortion, fixed)
     r = jax.tree_util.tree_map(np.asarray, r)
     per_view = ("used", "drop_reason", "view_rms", "v_x", "l_s")
     r = eqx.tree_at(lambda x: [getattr(x, k) for k in per_view], r, [getattr(r, k)[:V] for k in per_view])
@@ -637,6 +739,9 @@ def calibrate(
     homologies=None,
     outline_error: float = OUTLINE_ERROR_PX,
     image_size: tuple[int, int] | None = None,
+    distortion: str = "none",
+    principal_point=None,
+    focal_length: float | None = None,
     throw: bool = False,
 ) -> Calibration:
     """Calibrate a camera from the outlines of surfaces of revolution.
@@ -665,6 +770,33 @@ def calibrate(
             with the principal point outside the image, or a field of view above
             ``MAX_FOV_DEG`` (120 deg), is then reported as not determined (the outlines'
             errors made it, not their perspective).
+        distortion: the lens model: "none" (default: a pinhole, as the paper), "k1"
+            or "k1k2" (OpenCV's radial distortion about the principal point, estimated
+            by the bundle with the intrinsics: ``Calibration.distortion``).  The
+            coefficients count as determined only when the fit with no distortion is
+            worse beyond the noise and ``PERSPECTIVE_FACTOR`` times ``outline_error``
+            (as for perspective); otherwise the distortion-free K is returned with its
+            standard deviations widened by the difference between the two fits (the
+            outlines cannot tell distortion from a change of focal length) and NaN
+            coefficients, with a warning.
+        principal_point: the principal point held fixed, as OpenCV's
+            ``CALIB_FIX_PRINCIPAL_POINT``: ``(cx, cy)`` px, or "centre" for the image
+            centre ``((width - 1) / 2, (height - 1) / 2)`` (OpenCV's pixel-centre
+            convention; needs ``image_size``); None (default): estimated.  The bundle
+            only.  With it, one outline is enough: its ``v_x`` and ``l_s`` then give
+            the focal length (Wong, Mendonca and Cipolla, IVC 2004: with the
+            principal point at the origin and ``K = diag(a f, f, 1)``, ``omega v_x ~
+            l_s`` gives ``f^2 = dist(pp, v_x) dist(pp, l_s)``, and a redundant
+            constraint); the aspect ratio is then taken as 1 unless given.  A view
+            whose ``v_x`` is at infinity (its imaged axis through the principal
+            point) leaves the focal length free: refused as ``RESULTS.degenerate``
+            with the reason in ``details``.
+        focal_length: ``fv`` px held fixed (``fu = aspect_ratio fv``, the aspect
+            ratio 1 unless given), as OpenCV's ``CALIB_FIX_FOCAL_LENGTH``; only the
+            principal point (and the distortion, when asked) is estimated.  The
+            bundle only.  Two views are still needed unless the principal point is
+            fixed too (one view puts the principal point at either of two places).
+            Fixed intrinsics have a standard deviation of 0.
         throw: raise :class:`CalibrationError` instead of returning a failed result.
 
     Returns:
@@ -693,6 +825,11 @@ def calibrate(
       saying what kind of extra view would help.
     """
     _check_method(method, aspect_ratio)
+    if not isinstance(distortion, str) or distortion not in ("none", "k1", "k1k2"):
+        raise ValueError(f"distortion must be 'none', 'k1' or 'k1k2' (OpenCV's radial terms); got {distortion!r}.")
+    if distortion != "none" and method != "bundle":
+        raise ValueError(f"distortion={distortion!r} is estimated by the bundle only; use method='bundle' (the "
+                         f"default) instead of {method!r}.")
     _check_sizes(n_samples, n_points)
     if isinstance(outline_error, bool) or not isinstance(outline_error, (int, float, np.integer, np.floating)) or not (
         math.isfinite(outline_error) and outline_error >= 0
@@ -708,14 +845,21 @@ def calibrate(
             raise ValueError(f"image_size must be (width, height) in pixels, two positive integers; got "
                              f"{image_size!r}.") from None
         image_size = (iw, ih)
+    pp_fixed, f_fixed = _check_fixed(principal_point, focal_length, image_size, method)
     outs = as_outlines(outlines, n_points)
-    if len(outs) < 2:
+    if len(outs) == 1 and pp_fixed is not None:
+        aspect_ratio = 1.0 if aspect_ratio is None else aspect_ratio  # the single-view case: square pixels
+    if f_fixed is not None and aspect_ratio is None:
+        aspect_ratio = 1.0  # a fixed focal length fixes fu = aspect fv: square pixels unless told
+    if len(outs) < (1 if pp_fixed is not None else 2):
         raise ValueError(
             f"calibration needs at least two outlines (views) of surfaces of revolution; got "
             f"{len(outs)}. One outline gives only its own axis l_s and vanishing point v_x "
             "(use sorjax.fit_homology): two constraints on the four intrinsics (fu, fv, u0, v0), "
             "which leaves the camera undetermined. Add an outline from another view (the object "
-            "moved or tilted, or another object)."
+            "moved or tilted, or another object), or fix the principal point (principal_point=(cx, cy) or "
+            "'centre'; the command line's --principal-point CX CY or --centre-principal-point): one view then "
+            "gives the focal length."
         )
     homologies = _check_homologies(homologies, len(outs))
     if homologies is None:
@@ -743,22 +887,28 @@ def calibrate(
     )
     points = np.stack([np.asarray(o.points, np.float64) for o in outs])
     homs = view_homologies(homologies, n_samples)
+    fixed = None
+    if pp_fixed is not None or f_fixed is not None:
+        fixed = (math.nan, math.nan if f_fixed is None else f_fixed) + (pp_fixed or (math.nan, math.nan))
     r = _run_core(points, homs, method, math.nan if aspect_ratio is None else float(aspect_ratio), options,
-                  (math.nan, math.nan) if image_size is None else image_size)
+                  (math.nan, math.nan) if image_size is None else image_size, distortion, fixed)
 
     dup_of = np.asarray(r.checks.duplicate_of)
     notes = (floor_note + view_notes(homs, r.drop_reason, dup_of=dup_of) + model_notes(r, outline_error)
-             + verdict_notes(r, method, a, outs))
+             + distortion_notes(r, distortion, outline_error) + verdict_notes(r, method, a, outs))
     for msg in notes:
         warnings.warn(msg, stacklevel=2)
     used = tuple(int(i) for i in np.flatnonzero(r.used))
-    details = details_for(r, homs, outs, method, a, outline_error, image_size)
+    details = details_for(r, homs, outs, method, a, outline_error, image_size, pp_fixed)
     cal = Calibration(
         jnp.asarray(r.K), jnp.asarray(r.omega), homologies, _code_item(r.result), jnp.asarray(r.covariance),
         jnp.asarray(r.cost), jnp.asarray(r.view_rms[r.used]), jnp.asarray(r.steps), jnp.asarray(r.v_x[r.used]),
         jnp.asarray(r.l_s[r.used]), method, a, used, details, dropped_views(homs, r.drop_reason, dup_of),
         tuple(notes), float(r.perspective_px), float(r.perspective_z), float(outline_error),
-        jax.tree_util.tree_map(jnp.asarray, r.checks),
+        jax.tree_util.tree_map(jnp.asarray, r.checks), distortion,
+        None if distortion == "none" else jnp.asarray(r.distortion[: {"k1": 1, "k1k2": 2}[distortion]]),
+        None if distortion == "none" else jnp.asarray(r.distortion_std[: {"k1": 1, "k1k2": 2}[distortion]]),
+        pp_fixed, f_fixed,
     )
     if throw and not cal.success:
         raise CalibrationError(cal.message)

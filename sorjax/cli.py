@@ -356,7 +356,7 @@ def _calibrate(args) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         cal = sorjax.calibrate(outlines, method=args.method, aspect_ratio=args.aspect_ratio,
-                               outline_error=args.outline_error, image_size=size)
+                               outline_error=args.outline_error, image_size=size, distortion=args.distortion)
     for w in caught:
         print(f"warning: {w.message}", file=sys.stderr)
     used = set(cal.used)
@@ -383,11 +383,14 @@ def _calibrate(args) -> int:
     print(f"method {cal.method}; views used {len(used)} of {len(outlines)}")
     for n, v, s in zip(("fu", "fv", "u0", "v0"), (cal.fu, cal.fv, cal.u0, cal.v0), std):
         print(f"  {n} = {v:10.3f} px" + (f"  +- {s:.3f}" if np.isfinite(s) else ""))
+    if cal.distortion is not None:
+        for n, v, s in zip(("k1", "k2"), np.asarray(cal.distortion), np.asarray(cal.distortion_std)):
+            print(f"  {n} = {v:10.5f}" + (f"     +- {s:.5f}" if np.isfinite(v) else "  (not determined)"))
     print("K =")
     print(np.array2string(np.asarray(cal.K), precision=3, suppress_small=True))
     if np.isfinite(cal.perspective_px):
         print(f"perspective shown by the outlines: {cal.perspective_px:.3g} px RMS (z = {cal.perspective_z:.3g}; "
-              f"the focal length needs >= {3 * args.outline_error:.3g} px, 3 x --outline-error)")
+              f"the focal length needs >= {3 * cal.outline_error:.3g} px, 3 x the outline error)")
     if plan is not None:
         if size is None:
             pts = np.concatenate([np.asarray(o).reshape(-1, 2) for o in outlines])
@@ -457,6 +460,9 @@ def main(argv=None) -> int:
                    "one overlay PNG per image)")
     c.add_argument("--method", default="bundle", choices=["bundle", "I", "IIa", "IIb"])
     c.add_argument("--aspect-ratio", type=_number_arg(0.0, True, "fu / fv"), default=None, help="known fu / fv")
+    c.add_argument("--distortion", choices=("none", "k1", "k1k2"), default="none",
+                   help="lens model: none (pinhole, default), k1 or k1k2 (OpenCV's radial terms, estimated by the "
+                        "bundle and written to the camera file)")
     c.add_argument("--outline-error", type=_nonnegative, default=0.1, metavar="PX",
                    help="systematic error of the outlines in px that their symmetry does not show "
                         "(segmentation, lens distortion); the outlines must show 3x this much perspective "

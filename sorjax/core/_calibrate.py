@@ -21,13 +21,14 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from .._bundle import bundle_estimate, bundle_seeds, linearised_covariance
+from .._bundle import (DISTORTION_MODELS, bundle_estimate, bundle_estimate_distorted, bundle_seeds, distortion_gate,
+                       linearised_covariance)
 from .._camera import intrinsics_matrix, transform_points
 from .._linear import linear_estimate
 from ._assess import (DUPLICATE, USED, assess, axes_intersection, outline_extent, outline_radius,
                       perspective_gate, view_verdicts)
 from ._checks import (CULPRIT_ASPECT, CULPRIT_VIEWS, MODEL_CONTRADICTED, MODEL_OK, MODEL_WIDENED, NO_CULPRIT,
-                      ModelChecks, consistency, duplicate_views, fixed_aspect_check, view_scores)
+                      ModelChecks, consistency, duplicate_views, fixed_aspect_check, n_free_intrinsics, view_scores)
 from ._options import Options
 from ._prepare import joint_transform, prepare_views
 from ._result import RESULTS, CoreResult
@@ -41,7 +42,7 @@ def _nan(shape):
 
 
 def calibrate(points: Float[Array, "V M 2"], method: str = "bundle", aspect=jnp.nan, *, options: Options = Options(),
-              image_size=None, valid=None) -> CoreResult:
+              image_size=None, valid=None, distortion: str = "none", fixed=None) -> CoreResult:
     """Calibrate from ``V`` outlines of ``M`` evenly spaced pixel points each (e.g.
     :func:`sorjax.make_outline`'s points, positively oriented).
 
@@ -52,9 +53,20 @@ def calibrate(points: Float[Array, "V M 2"], method: str = "bundle", aspect=jnp.
         options: :class:`Options` (static).
         image_size: (2,) ``(width, height)`` px, or None / NaN when unknown.
         valid: (V,) bool, views to consider (False: padding, left out); default all.
+        distortion: the lens model of the bundle (static): "none" (a pinhole), "k1"
+            or "k1k2" (OpenCV's radial terms, estimated with the intrinsics:
+            :func:`sorjax._bundle.bundle_estimate_distorted`; the bundle only).
+        fixed: (4,) intrinsics held at known values, ``(fu, fv, u0, v0)`` px with NaN
+            where free (OpenCV's fixed-parameter flags: a principal point, a focal
+            length), or None (all free; the program traced before fixed parameters
+            existed).  The bundle only.  With a known aspect ratio fix ``fv`` (``fu =
+            aspect fv``).  Fewer intrinsics to estimate need fewer views: with the
+            principal point fixed and at most two intrinsics free, one view with a
+            finite ``v_x`` is enough (:func:`views_needed`).
     """
     homs = fit_homologies(points, options)
-    return calibrate_homologies(points, homs, method, aspect, options=options, image_size=image_size, valid=valid)
+    return calibrate_homologies(points, homs, method, aspect, options=options, image_size=image_size, valid=valid,
+                                distortion=distortion, fixed=fixed)
 
 
 def fit_homologies(points: Float[Array, "V M 2"], options: Options = Options(), sequential: bool | None = None
@@ -102,16 +114,41 @@ def _common(points, homs: ViewHomologies, valid, options: Options) -> _Common:
     )
 
 
-def _bundle(c: _Common, homs: ViewHomologies, aspect, options: Options):
-    """The bundle for one aspect model and the score statistics of its views
-    (:func:`sorjax.core._checks.view_scores`): ``(BundleOut, (S, delta_px2, n))``."""
-    seeds, seed_ok = bundle_seeds(homs.v_x, homs.l_s, c.used, c.T, aspect)
-    out = bundle_estimate(c.points_n, c.used, c.inliers, c.l_n, seeds, seed_ok, aspect, c.T, options)
+def _bundle(c: _Common, homs: ViewHomologies, aspect, options: Options, fixed=None):
+    """The bundle for one aspect model (``fixed``: intrinsics held fixed, px, or None)
+    and the score statistics of its views (:func:`sorjax.core._checks.view_scores`):
+    ``(BundleOut, (S, delta_px2, n))``."""
+    seeds, seed_ok = bundle_seeds(homs.v_x, homs.l_s, c.used, c.T, aspect, fixed)
+    out = bundle_estimate(c.points_n, c.used, c.inliers, c.l_n, seeds, seed_ok, aspect, c.T, options, fixed)
     y = jax.lax.stop_gradient(out.y)
-    return out, view_scores(y, c.points_n, c.used, c.inliers, aspect, c.T, options)
+    return out, view_scores(y, c.points_n, c.used, c.inliers, aspect, c.T, options, fixed)
 
 
-def _bundles(c: _Common, homs: ViewHomologies, aspects, options: Options):
+def _distorted(c: _Common, homs: ViewHomologies, aspect, options: Options, distortion: str, fixed=None):
+    """The bundle with radial distortion (:func:`sorjax._bundle.bundle_estimate_distorted`)
+    and the evidence gate for it (:func:`sorjax._bundle.distortion_gate`: the fit with
+    ``k = 0`` must be worse by the noise and by the declared outline error).  Returns
+    ``(BundleOut, (k (2,), k_std (2,), g_px, z))``: with the evidence, the fit with
+    distortion; without it, the distortion-free fit with its covariance widened by
+    ``d d^T`` (``d`` the difference between the two fits' ``(fu, fv, u0, v0)``: the
+    outlines cannot tell which is right) and ``k`` NaN (not determined)."""
+    seeds, seed_ok = bundle_seeds(homs.v_x, homs.l_s, c.used, c.T, aspect, fixed)
+    d = bundle_estimate_distorted(c.points_n, c.used, c.inliers, c.l_n, seeds, seed_ok, aspect, c.T, options,
+                                  distortion, fixed)
+    fit, free = d.fit, d.free
+    gate, g, z = distortion_gate(d.delta, fit.n, jnp.sqrt(fit.s2), options)
+    gate = gate & d.ok
+    est = lambda K: jnp.stack([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])  # noqa: E731
+    dd = jnp.where(jnp.all(jnp.isfinite(fit.K)), est(fit.K) - est(free.K), jnp.inf)
+    widened = eqx.tree_at(lambda b: b.cov, free, free.cov + jnp.outer(dd, dd))
+    fit = eqx.tree_at(lambda b: b.y, fit, free.y)  # (the charts differ in size; y is not used beyond here)
+    out = jax.tree_util.tree_map(lambda a, b: jnp.where(gate, a, b), fit, widened)
+    k = jnp.zeros(2).at[: d.k.shape[0]].set(d.k)
+    k_std = jnp.zeros(2).at[: d.k.shape[0]].set(d.k_std)
+    return out, (jnp.where(gate, k, jnp.nan), k_std, g, z)
+
+
+def _bundles(c: _Common, homs: ViewHomologies, aspects, options: Options, fixed=None):
     """The bundles of every aspect model in ``aspects`` (one traced solver,
     ``jax.lax.map``) and the free-aspect fit the model checks compare a known aspect
     ratio with: the one among them when there is one, else one more solve, run only
@@ -121,7 +158,7 @@ def _bundles(c: _Common, homs: ViewHomologies, aspects, options: Options):
     need = jnp.any(jnp.isfinite(aspects)) & ~jnp.any(jnp.isnan(aspects))
     run_aspects = jnp.concatenate([aspects, jnp.full(1, jnp.nan)])
     run = jnp.concatenate([jnp.ones(k, bool), need[None]])
-    solve = lambda a: _bundle(c, homs, a, options)  # noqa: E731
+    solve = lambda a: _bundle(c, homs, a, options, fixed)  # noqa: E731
     shape = jax.eval_shape(solve, aspects[0])
     skip = lambda a: jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shape)  # noqa: E731
     outs = jax.lax.map(lambda ar: jax.lax.cond(ar[1], solve, skip, ar[0]), (run_aspects, run))
@@ -141,6 +178,31 @@ def _linear_cov(c: _Common, K, a_m, options: Options):
                                  options.n_samples)
 
 
+def _check_fixed(fixed):
+    """``fixed`` as a (4,) float64 array, or None."""
+    if fixed is None:
+        return None
+    fixed = jnp.asarray(fixed, jnp.float64)
+    if fixed.shape != (4,):
+        raise ValueError(f"fixed must be (fu, fv, u0, v0) px with NaN where free, shape (4,); got {fixed.shape}")
+    return fixed
+
+
+def views_needed(aspect, fixed=None):
+    """The fewest used views that can determine the free intrinsics: 2, or 1 when the
+    principal point is fixed and at most two intrinsics are free (each view gives two
+    constraints, the pole-polar relation ``omega v_x ~ l_s``: with the principal point
+    and the aspect ratio known, one view gives the focal length and a redundant
+    constraint; with the aspect ratio free, ``fu`` and ``fv`` exactly).  With the
+    principal point free one view is never enough, even with the focal length fixed:
+    the principal point then lies on the line through ``v_x`` orthogonal to ``l_s`` at
+    either root of ``d (D - d) = f^2`` (two cameras fit)."""
+    if fixed is None:
+        return jnp.asarray(2)
+    pp_fixed = jnp.all(jnp.isfinite(fixed[2:]))
+    return jnp.where(pp_fixed & (n_free_intrinsics(aspect, fixed) <= 2), 1, 2)
+
+
 def _check(points, valid, image_size, aspect):
     points = jnp.asarray(points, jnp.float64)
     valid = jnp.ones(points.shape[0], bool) if valid is None else jnp.asarray(valid, bool)
@@ -149,28 +211,43 @@ def _check(points, valid, image_size, aspect):
 
 
 def calibrate_homologies(points: Float[Array, "V M 2"], homs: ViewHomologies, method: str = "bundle", aspect=jnp.nan,
-                         *, options: Options = Options(), image_size=None, valid=None) -> CoreResult:
+                         *, options: Options = Options(), image_size=None, valid=None,
+                         distortion: str = "none", fixed=None) -> CoreResult:
     """:func:`calibrate` from per-view homologies already fitted (pixels)."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}; got {method!r}")
+    if distortion not in DISTORTION_MODELS:
+        raise ValueError(f"distortion must be one of {tuple(DISTORTION_MODELS)}; got {distortion!r}")
+    if distortion != "none" and method != "bundle":
+        raise ValueError(f"distortion={distortion!r} is estimated by the bundle only; got method={method!r}")
+    if fixed is not None and method != "bundle":
+        raise ValueError(f"fixed intrinsics are held by the bundle only; got method={method!r}")
+    fixed = _check_fixed(fixed)
     points, valid, image_size, aspect = _check(points, valid, image_size, aspect)
     c = _common(points, homs, valid, options)
+    if distortion != "none":
+        out, dist = _distorted(c, homs, aspect, options, distortion, fixed)
+        return _finish(points, homs, c, method, aspect, image_size, options, bundle=(out, None), distortion=dist,
+                       fixed=fixed)
     if method == "bundle":
-        outs, free = _bundles(c, homs, aspect[None], options)
+        outs, free = _bundles(c, homs, aspect[None], options, fixed)
         b = jax.tree_util.tree_map(lambda x: x[0], outs)
-        return _finish(points, homs, c, method, aspect, image_size, options, bundle=b, free=free)
+        return _finish(points, homs, c, method, aspect, image_size, options, bundle=b, free=free, fixed=fixed)
     a_m = _linear_aspect(method, aspect)
     K, omega, ok = linear_estimate(homs.v_x, homs.l_s, c.used, c.T, a_m, method=method)
     return _finish(points, homs, c, method, aspect, image_size, options, linear=(K, omega, ok, _linear_cov(c, K, a_m, options)))
 
 
 def calibrate_methods(points: Float[Array, "V M 2"], homs: ViewHomologies, methods: tuple[str, ...], aspects,
-                      *, options: Options = Options(), image_size=None, valid=None) -> tuple[CoreResult, ...]:
+                      *, options: Options = Options(), image_size=None, valid=None,
+                      fixed=None) -> tuple[CoreResult, ...]:
     """:func:`calibrate_homologies` for several ``methods`` (static tuple) with their
     ``aspects`` (one each, NaN: free) at once, as an experiment comparing estimators
     runs them: the bundles of every aspect model share one traced solver
     (``jax.lax.map`` over the aspects), and so do the linear methods' covariances.
-    The same numbers as separate calls, a fraction of the compilation."""
+    The same numbers as separate calls, a fraction of the compilation.  ``fixed``
+    (intrinsics held fixed, px; None: none) applies to the bundle only: the linear
+    methods' results ignore it."""
     for m in methods:
         if m not in METHODS:
             raise ValueError(f"method must be one of {METHODS}; got {m!r}")
@@ -179,7 +256,8 @@ def calibrate_methods(points: Float[Array, "V M 2"], homs: ViewHomologies, metho
     c = _common(points, homs, valid, options)
     ib = [i for i, m in enumerate(methods) if m == "bundle"]
     il = [i for i, m in enumerate(methods) if m != "bundle"]
-    bundles, free = _bundles(c, homs, aspects[jnp.asarray(ib)], options) if ib else (None, None)
+    fixed = _check_fixed(fixed)
+    bundles, free = _bundles(c, homs, aspects[jnp.asarray(ib)], options, fixed) if ib else (None, None)
     lin = {}
     if il:
         a_ms = jnp.stack([_linear_aspect(methods[i], aspects[i]) for i in il])
@@ -191,20 +269,20 @@ def calibrate_methods(points: Float[Array, "V M 2"], homs: ViewHomologies, metho
     for i, m in enumerate(methods):
         if m == "bundle":
             b = jax.tree_util.tree_map(lambda x: x[ib.index(i)], bundles)
-            out.append(_finish(points, homs, c, m, aspects[i], image_size, options, bundle=b, free=free))
+            out.append(_finish(points, homs, c, m, aspects[i], image_size, options, bundle=b, free=free, fixed=fixed))
         else:
             out.append(_finish(points, homs, c, m, aspects[i], image_size, options, linear=lin[i]))
     return tuple(out)
 
 
-def _model_checks(out, scores, free_fit, aspect, c: _Common, options: Options):
+def _model_checks(out, scores, free_fit, aspect, c: _Common, options: Options, fixed=None):
     """The model checks of a bundle estimate (:mod:`sorjax.core._checks`): ``(checks,
     cov)`` with ``cov`` the bundle's covariance widened as the checks say."""
     S, delta, n = scores
     free_out = free_fit[0]
     a_free, a_std, a_z, a_px, a_rej, a_beyond = fixed_aspect_check(
         aspect, out.K, out.cost, free_out.K, free_out.cov, free_out.cost, free_out.ok, out.n, options)
-    dof, p, g, v_rej, v_beyond, birge = consistency(S, delta, n, c.used, aspect, options)
+    dof, p, g, v_rej, v_beyond, birge = consistency(S, delta, n, c.used, aspect, options, fixed)
     est = jnp.stack([out.K[0, 0], out.K[1, 1], out.K[0, 2], out.K[1, 2]])
     est_free = jnp.stack([free_out.K[0, 0], free_out.K[1, 1], free_out.K[0, 2], free_out.K[1, 2]])
     d = jnp.where(a_rej & ~a_beyond, est - est_free, 0.0)
@@ -237,19 +315,30 @@ def _no_checks(aspect, c: _Common, options: Options) -> ModelChecks:
 
 
 def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image_size, options: Options, bundle=None,
-            linear=None, free=None) -> CoreResult:
+            linear=None, free=None, distortion=None, fixed=None) -> CoreResult:
     """The verdicts and the result of one method's estimate (``bundle``: a
     :class:`sorjax._bundle.BundleOut` and its views' scores, ``free`` the same of the
-    free-aspect fit; ``linear``: ``(K, omega, ok, cov_unit)``)."""
+    free-aspect fit; ``linear``: ``(K, omega, ok, cov_unit)``; ``fixed``: the
+    intrinsics the bundle held fixed, px, or None)."""
+    if linear is not None:
+        fixed = None
     free_aspect = jnp.isnan(aspect) if method == "bundle" else jnp.asarray(method == "IIa")
+    if fixed is not None:
+        pp_fixed = jnp.all(jnp.isfinite(fixed[2:]))
+        focal_fixed = jnp.isfinite(fixed[1]) & (jnp.isfinite(fixed[0]) | jnp.isfinite(aspect))
     used, n_used, all_inf, radius, rms_u = c.used, c.n_used, c.all_inf, c.radius, c.rms_u
     if bundle is not None:
         out, scores = bundle
         K, omega, ok = out.K, out.omega, out.ok
-        checks, cov = _model_checks(out, scores, free, aspect, c, options)
+        if scores is None:  # (the model checks of the pinhole bundle do not apply)
+            checks, cov = _no_checks(aspect, c, options), out.cov
+        else:
+            checks, cov = _model_checks(out, scores, free, aspect, c, options, fixed)
         s_px = jnp.sqrt(out.s2)
         cov_unit = cov / jnp.maximum(s_px, 1e-300) ** 2
         persp_ok, g_px, z = perspective_gate(out.evidence, out.n, s_px, options)
+        if fixed is not None:  # a fixed focal length needs no evidence for perspective
+            persp_ok = persp_ok | focal_fixed
         cost, view_rms, steps, vx, ls = out.cost, jnp.where(used, out.view_rms, jnp.nan), out.steps, out.v_x, out.l_s
         code = RESULTS.where(ok & jnp.all(jnp.isfinite(K)), RESULTS.successful, RESULTS.not_converged)
         assessed = jnp.all(jnp.isfinite(K)) & (K[0, 0] > 0) & (K[1, 1] > 0)
@@ -265,6 +354,11 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
         assessed = ok & finite & (K[0, 0] > 0) & (K[1, 1] > 0)
         checks = _no_checks(aspect, c, options)
 
+    if distortion is None:
+        nan = jnp.asarray(jnp.nan)
+        dist_k, dist_std, dist_g, dist_z = jnp.zeros(2), jnp.zeros(2), nan, nan
+    else:
+        dist_k, dist_std, dist_g, dist_z = distortion
     est = jnp.stack([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
     verdict = assess(est, cov_unit, s_px, jnp.sqrt(jnp.sum(jnp.where(used, radius**2, 0.0)) / jnp.maximum(n_used, 1)),
                      outline_extent(points, used), image_size, free_aspect, all_inf, persp_ok, options)
@@ -282,6 +376,13 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
     partial = assessed & ~jnp.all(determined)
     code_partial = RESULTS.where(~jnp.any(determined[:2]) & jnp.all(determined[2:]), RESULTS.only_principal_point,
                                  RESULTS.degenerate)
+    if fixed is not None:
+        # the principal point given: "only the principal point" would be nothing found;
+        # every v_x at infinity then leaves the focal length free (the imaged axes all
+        # pass through the principal point): degenerate, the fixed principal point in K
+        code_partial = RESULTS.where(pp_fixed, RESULTS.degenerate, code_partial)
+        no_focal = pp_fixed & pp_only
+        pp_only = pp_only & ~pp_fixed
     code = RESULTS.where(partial, code_partial, code)
     K_out = _mask_undetermined(K, determined)
     success = code == RESULTS.successful
@@ -302,8 +403,14 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
     view_rms = jnp.where(pp_only, rms_u, view_rms)
     vx = jnp.where(pp_only, homs.v_x, vx)
     ls = jnp.where(pp_only, homs.l_s, ls)
+    if fixed is not None:
+        code = RESULTS.where(no_focal, RESULTS.degenerate, code)
+        K_out = jnp.where(no_focal, intrinsics_matrix(jnp.nan, jnp.nan, fixed[2], fixed[3]), K_out)
+        cov = jnp.where(no_focal, _nan((4, 4)).at[0, 0].set(jnp.inf).at[1, 1].set(jnp.inf).at[2:, 2:].set(0.0), cov)
+        omega = jnp.where(no_focal, _nan((3, 3)), omega)
+        determined = jnp.where(no_focal, jnp.array([False, False, True, True]), determined)
 
-    few = n_used < 2
+    few = n_used < views_needed(aspect, fixed)
     code = RESULTS.where(few, RESULTS.too_few_views, code)
     K_out = jnp.where(few, _nan((3, 3)), K_out)
     cov = jnp.where(few, _nan((4, 4)), cov)
@@ -316,6 +423,7 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
         drop_reason=c.drop, view_rms=view_rms, v_x=vx, l_s=ls, all_at_infinity=all_inf,
         perspective_px=jnp.asarray(g_px, jnp.float64), perspective_z=jnp.asarray(z, jnp.float64),
         perspective_ok=jnp.asarray(persp_ok), axes_spread_deg=spread, checks=checks,
+        distortion=dist_k, distortion_std=dist_std, distortion_px=dist_g, distortion_z=dist_z,
     )
 
 

@@ -88,6 +88,11 @@ class CoreResult(eqx.Module):
             the linear methods), px RMS per sample and as a z-score.
         perspective_ok: the evidence passes the gate (True for the linear methods).
         axes_spread_deg: largest angle between the used imaged axes.
+        distortion: (2,) OpenCV's radial coefficients ``(k1, k2)`` of the lens model
+            (zeros for a pinhole; NaN when estimated but not determined by the
+            outlines); ``distortion_std`` (2,) their standard deviations (0: fixed).
+        distortion_px, distortion_z: the evidence for distortion (the fit with ``k = 0``
+            worse by this RMS per sample, px, and z-score; NaN for a pinhole).
         checks: the model checks' statistics (:class:`sorjax.core._checks.ModelChecks`;
             run on the bundle's estimate: a linear method's has none but the duplicates).
     """
@@ -116,6 +121,10 @@ class CoreResult(eqx.Module):
     perspective_ok: Bool[Array, ""]
     axes_spread_deg: Float[Array, ""]
     checks: ModelChecks
+    distortion: Float[Array, "2"]
+    distortion_std: Float[Array, "2"]
+    distortion_px: Float[Array, ""]
+    distortion_z: Float[Array, ""]
 
     @property
     def success(self):
