@@ -64,7 +64,7 @@ from ._camera import pixel_intrinsics as _pixel_intrinsics
 from ._distortion import distort, undistort
 from ._field import DistanceField, closest_parameter, setup, signed_distances
 from ._homology import homology_matrix, symmetry_feet, symmetry_residuals, transfer
-from ._linear import linear_estimates
+from ._linear import focal_from_principal_point, linear_estimates
 from ._solvers import NULL_RCOND, Solved, is_stale, polish_traced, solvers, until_fresh_traced
 from .core._options import Options
 
@@ -75,6 +75,10 @@ class BundleProblem(eqx.Module):
     weights (V, N), the known aspect ratio (NaN for free aspect), and ``n_dist``
     (static): the number of radial distortion coefficients in the model (0: the
     pinhole bundle; 1: k1; 2: k1, k2; see :func:`distorted_transfer`).
+
+    ``fixed`` (4,): intrinsics held at known values, in the chart's units ``(log fu,
+    log fv, u0, v0)`` (normalised; NaN: free; None: all free, the program traced
+    before fixed parameters existed), see :func:`pin_intrinsics`.
 
     A view left out (masked, :func:`make_problem`) keeps its slot with all weights
     zero: its residuals are zero and its ``(theta, rho)`` have zero Jacobian columns
@@ -87,6 +91,7 @@ class BundleProblem(eqx.Module):
     weights: Float[Array, "V N"]
     aspect: Float[Array, ""]
     n_dist: int = eqx.field(static=True, default=0)
+    fixed: Float[Array, "4"] | None = None
 
     @property
     def used(self):
@@ -94,16 +99,47 @@ class BundleProblem(eqx.Module):
         return jnp.any(self.weights > 0, axis=-1)
 
 
-def unpack_intrinsics(k, aspect):
+def pin_intrinsics(k, fixed):
+    """The chart ``k`` (4 entries ``(log fu, log fv, u0, v0)`` or 3 ``(log fv, u0,
+    v0)``) with its fixed entries replaced by their values: ``fixed`` (4,) in the
+    4-chart's units, NaN where free (its ``log fu`` is dropped for the 3-chart), or
+    None (``k`` itself).
+
+    OpenCV-style fixed parameters (a principal point, a focal length known): the chart
+    keeps its size, and a fixed entry of ``k`` is simply ignored, so that its Jacobian
+    column is exactly zero -- as the padded chart's ``k[0]`` with a known aspect ratio
+    (:func:`unpack_intrinsics`): the solvers leave it alone, :func:`n_params` does not
+    count it and :func:`covariance` gives the pixel intrinsics it held a variance of 0
+    (a fixed value), not infinity.  ``jnp.where`` selects: with nothing fixed the
+    values and derivatives are bit for bit those of ``k``."""
+    if fixed is None:
+        return k
+    f = fixed if k.shape[-1] == 4 else fixed[1:]
+    return jnp.where(jnp.isfinite(f), f, k)
+
+
+def free_intrinsics(aspect, fixed):
+    """(4,) bool: which of ``(fu, fv, u0, v0)`` are estimated, for a known aspect
+    ratio ``aspect`` (NaN: free; ``fu = aspect fv`` otherwise) and ``fixed`` (4,) chart
+    values (NaN: free; None: none fixed).  ``fu`` is free only with a free aspect ratio
+    and no fixed ``fu``."""
+    fixed = jnp.full(4, jnp.nan) if fixed is None else jnp.asarray(fixed)
+    free = ~jnp.isfinite(fixed)
+    return free.at[0].set(free[0] & ~jnp.isfinite(aspect))
+
+
+def unpack_intrinsics(k, aspect, fixed=None):
     """``(fu, fv, u0, v0)`` (normalised units) from the intrinsic parameters ``k``:
     4 entries ``(log fu, log fv, u0, v0)``, or 3 ``(log fv, u0, v0)`` with
-    ``fu = aspect * fv``.
+    ``fu = aspect * fv``; entries held fixed (``fixed`` (4,) chart values, NaN: free;
+    :func:`pin_intrinsics`) replaced by their values.
 
     With 4 entries and a known ``aspect`` (not NaN), ``fu = aspect * fv`` and ``k[0]``
     is ignored: the bundle's solvers use this padded chart for both aspect models, so
     that each is compiled once (the ignored entry has a zero Jacobian column, which the
     Gauss-Newton step's truncated SVD, the damped Levenberg-Marquardt step and the
     covariance's null-space test all leave alone; see :func:`n_params`)."""
+    k = pin_intrinsics(k, fixed)
     if k.shape[-1] == 4:
         fv = jnp.exp(k[1])
         known = jnp.isfinite(aspect)
@@ -124,12 +160,33 @@ def split_params(k, problem):
 def n_params(y, problem) -> Float[Array, ""]:
     """The number of free parameters in ``y = (k, a)``: the intrinsics ``k`` (less the
     ignored ``k[0]`` of the padded chart when the aspect ratio is known,
-    :func:`unpack_intrinsics`; distortion coefficients included) and two per *used*
-    view (a masked view's ``(theta, rho)`` touch no residual)."""
+    :func:`unpack_intrinsics`, and the entries held fixed, :func:`pin_intrinsics`;
+    distortion coefficients included) and two per *used* view (a masked view's
+    ``(theta, rho)`` touch no residual)."""
     nk = y[0].shape[-1]
     padded = nk - problem.n_dist == 4
     n_used = jnp.sum(problem.used).astype(jnp.float64)
+    if problem.fixed is not None:
+        n_free = jnp.sum(free_intrinsics(problem.aspect, problem.fixed)).astype(jnp.float64)
+        return n_free + problem.n_dist + 2.0 * n_used
     return nk + 2.0 * n_used - (jnp.isfinite(problem.aspect).astype(jnp.float64) if padded else 0.0)
+
+
+def _intrinsics(k, problem):
+    """``(fu, fv, u0, v0)`` (normalised) of the bundle's ``k`` (distortion coefficients
+    split off, fixed entries pinned)."""
+    return unpack_intrinsics(split_params(k, problem)[0], problem.aspect, problem.fixed)
+
+
+def fixed_chart(fixed_px, T):
+    """The chart values ``(log fu, log fv, u0, v0)`` (normalised by the similarity ``T``,
+    ``x_n = T x``: ``f_n = T[0, 0] f``, ``u0_n = T[0, 0] u0 + T[0, 2]``) of intrinsics
+    held fixed, ``fixed_px`` (4,) = ``(fu, fv, u0, v0)`` in pixels with NaN where free.
+    Traced; NaN stays NaN."""
+    p = jnp.asarray(fixed_px, jnp.float64)
+    s = T[0, 0]
+    f = jnp.where(p[:2] > 0, p[:2], jnp.nan) * s
+    return jnp.concatenate([jnp.log(f), jnp.stack([s * p[2] + T[0, 2], s * p[3] + T[1, 2]])])
 
 
 def pack_intrinsics(fu, fv, u0, v0, free_aspect: bool):
@@ -173,7 +230,7 @@ def pole_polar_pairs(y, problem: BundleProblem):
     """Per-view ``(v_x, l_s)`` for ``y = (k, (theta, rho))``: ``l_s = (cos theta,
     sin theta, -rho)``, ``v_x = omega^-1 l_s`` (unit norm); (V, 3) each."""
     k, a = y
-    omega = omega_matrix(omega_vector_from_intrinsics(*unpack_intrinsics(split_params(k, problem)[0], problem.aspect)))
+    omega = omega_matrix(omega_vector_from_intrinsics(*_intrinsics(k, problem)))
     l = jnp.stack([jnp.cos(a[:, 0]), jnp.sin(a[:, 0]), -a[:, 1]], axis=-1)
     v = jnp.linalg.solve(omega, l.T).T  # omega is symmetric: v_j = omega^-1 l_j
     return v / jnp.linalg.norm(v, axis=-1, keepdims=True), l
@@ -192,8 +249,8 @@ def distorted_transfer(y, problem: BundleProblem) -> Float[Array, "V N 2"]:
     ``D^-1`` its Newton inverse, ``W`` the homology of the pinhole (undistorted) image.
     A masked view is mapped with zero distortion (its weights are zero; no NaN from its
     placeholder outline)."""
-    k, d = split_params(y[0], problem)
-    Kn = intrinsics_matrix(*unpack_intrinsics(k, problem.aspect))
+    d = split_params(y[0], problem)[1]
+    Kn = intrinsics_matrix(*_intrinsics(y[0], problem))
     v, l = pole_polar_pairs(y, problem)
     dv = jnp.where(problem.used[:, None], d, 0.0)
 
@@ -354,7 +411,7 @@ def solution_in_pixels(y, problem: BundleProblem, T):
     """``(K, omega, v_x, l_s)`` in pixels for the parameters ``y`` (normalised by the
     similarity ``T``): ``K = T^-1 K'``, unit ``v_x`` and ``l_s = omega v_x`` with
     ``a^2 + b^2 = 1``, one row per view."""
-    K = jnp.linalg.solve(T, intrinsics_matrix(*unpack_intrinsics(split_params(y[0], problem)[0], problem.aspect)))
+    K = jnp.linalg.solve(T, intrinsics_matrix(*_intrinsics(y[0], problem)))
     Ki = jnp.linalg.inv(K)
     v, l = pole_polar_pairs(y, problem)
     vx = v @ jnp.linalg.inv(T).T
@@ -370,8 +427,8 @@ def pixel_params(k, problem: BundleProblem, T):
     """The pixel intrinsics ``(fu, fv, u0, v0)`` of the chart ``k`` (normalised by the
     similarity ``T``), followed by the distortion coefficients ``(k1[, k2])`` when the
     problem has them (dimensionless: the same in every frame)."""
-    kk, d = split_params(k, problem)
-    p = _pixel_intrinsics(T, *unpack_intrinsics(kk, problem.aspect))
+    d = split_params(k, problem)[1]
+    p = _pixel_intrinsics(T, *_intrinsics(k, problem))
     return p if d is None else jnp.concatenate([p, d])
 
 
@@ -460,12 +517,13 @@ def _placeholder_outline(m: int):
     return jnp.stack([jnp.cos(t), jnp.sin(t)], axis=-1)
 
 
-def make_problem(points_n, n_samples: int, aspect=None, inliers=None, used=None) -> BundleProblem:
+def make_problem(points_n, n_samples: int, aspect=None, inliers=None, used=None, fixed=None) -> BundleProblem:
     """The :class:`BundleProblem` of (V, M, 2) normalised outline points: fields,
     ``n_samples`` samples per view (:func:`sorjax._field.setup`), their corner weights
     times the optional (V, N) 0/1 ``inliers`` mask and the (V,) bool ``used`` mask (a
     masked view keeps its slot: a placeholder field, all weights zero); ``aspect`` the
-    known ``fu / fv``, NaN or None (free).
+    known ``fu / fv``, NaN or None (free); ``fixed`` (4,) the chart values of intrinsics
+    held fixed (:func:`fixed_chart`; NaN: free) or None.
 
     Pure (jit / vmap / grad); nothing is kept between calls: a caller that needs the
     problem twice builds it once and passes it on."""
@@ -474,7 +532,11 @@ def make_problem(points_n, n_samples: int, aspect=None, inliers=None, used=None)
     used = jnp.ones(V, bool) if used is None else jnp.asarray(used, bool)
     inl = jnp.ones((V, n_samples)) if inliers is None else jnp.asarray(inliers, jnp.float64)
     a = jnp.asarray(jnp.nan if aspect is None else aspect, jnp.float64)
-    return _build_problem(pts, used, inl, a, n_samples)
+    problem = _build_problem(pts, used, inl, a, n_samples)
+    if fixed is None:
+        return problem
+    return BundleProblem(problem.fields, problem.samples, problem.weights, problem.aspect, problem.n_dist,
+                         jnp.asarray(fixed, jnp.float64))
 
 
 @functools.partial(jax.jit, static_argnames=("n_samples",))
@@ -490,13 +552,20 @@ FALLBACK_FOCALS = (2.0, 5.0, 12.0)  # normalised units: the spread of cameras tr
 
 
 @jax.jit
-def bundle_seeds(v_pix, l_pix, used, T, aspect):
+def bundle_seeds(v_pix, l_pix, used, T, aspect, fixed=None):
     """The bundle's intrinsic seeds (normalised units, :data:`SEED_BATCH` of them):
     Methods IIa, IIb and I (:func:`sorjax._linear.linear_estimates`; IIb and I with
     the known aspect ratio, 1 for free), projected onto a known aspect ratio
     ``a = aspect`` (``fv = sqrt(fu fv / a)``, ``fu = a fv``; NaN: free), then the
     fallback spread ``(a f, f, 0, 0)`` for f in :data:`FALLBACK_FOCALS`, valid only
     where no linear seed is.
+
+    ``fixed`` (4,): intrinsics held fixed, ``(fu, fv, u0, v0)`` px (NaN: free; None:
+    none).  The seeds' fixed entries are replaced in the bundle itself
+    (:func:`pin_intrinsics`); with the principal point fixed, the fourth seed (the
+    first of the spread) is the focal length of
+    :func:`sorjax._linear.focal_from_principal_point` (the single-view case, valid
+    whenever it is: one view suffices) at that principal point.
 
     Returns ``(seeds (6, 4), seed_ok (6,))``; a linear seed is valid when its method
     succeeded and its focal lengths are finite and positive."""
@@ -515,6 +584,14 @@ def bundle_seeds(v_pix, l_pix, used, T, aspect):
     spread = jnp.stack([a * f, f, jnp.zeros_like(f), jnp.zeros_like(f)], axis=-1)
     seeds = jnp.concatenate([jnp.where(lin_ok[:, None], lin, spread), spread])
     seed_ok = jnp.concatenate([lin_ok, jnp.broadcast_to(~jnp.any(lin_ok), f.shape)])
+    if fixed is not None:
+        fixed = jnp.asarray(fixed, jnp.float64)
+        f_pp, ok_pp = focal_from_principal_point(v_pix, l_pix, used, fixed[2:], a)
+        pp_n = T[:2, :2] @ fixed[2:] + T[:2, 2]
+        s = T[0, 0] * f_pp
+        closed = jnp.stack([a * s, s, pp_n[0], pp_n[1]])
+        seeds = seeds.at[3].set(jnp.where(ok_pp, closed, seeds[3]))
+        seed_ok = seed_ok.at[3].set(seed_ok[3] | ok_pp)
     return seeds, seed_ok
 
 
@@ -679,8 +756,20 @@ class BundleOut(eqx.Module):
     n: Float[Array, ""]
 
 
+def pin_params(k, problem: BundleProblem):
+    """The bundle's ``k`` (intrinsic chart, then any distortion coefficients) with its
+    fixed intrinsics written in (:func:`pin_intrinsics`): the solution a caller reads
+    is then the model's, also where a problem without ``fixed`` reads it."""
+    if problem.fixed is None:
+        return k
+    kk, d = split_params(k, problem)
+    kk = pin_intrinsics(kk, problem.fixed)
+    return kk if d is None else jnp.concatenate([kk, d])
+
+
 @jax.jit
-def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options: Options = Options()) -> BundleOut:
+def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options: Options = Options(),
+                    fixed=None) -> BundleOut:
     """The joint bundle, one pure function of arrays (jit, vmap over trials, grad:
     the optimum is differentiated implicitly, :func:`implicit_solution`).
 
@@ -695,13 +784,19 @@ def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, opt
         T: (3, 3) the normalising similarity (``x_n = T x``).
         options: :class:`sorjax.core.Options` (its static ``n_samples`` and
             ``bundle_max_steps``; under ``jax.vmap`` pass it unbatched, ``in_axes=None``).
+        fixed: (4,) intrinsics held at known values, ``(fu, fv, u0, v0)`` px, NaN
+            where free (OpenCV's fixed-parameter flags), or None (all free).  A fixed
+            entry gets a variance of 0 in ``cov``; ``fu`` fixed needs a free aspect
+            ratio (with a known one, fix ``fv``: ``fu = aspect fv``).
 
     Returns a :class:`BundleOut`."""
     used = jnp.asarray(used, bool)
     T = jnp.asarray(T, jnp.float64)
-    problem = make_problem(points_n, options.n_samples, aspect, inliers, used)
-    fixed = jax.lax.stop_gradient(problem)  # the solvers: no tangents into their loops
-    y, ok, steps, r = fit_bundle(fixed, jax.lax.stop_gradient(l_n), jax.lax.stop_gradient(seeds), seed_ok, options)
+    problem = make_problem(points_n, options.n_samples, aspect, inliers, used,
+                           None if fixed is None else fixed_chart(fixed, T))
+    frozen = jax.lax.stop_gradient(problem)  # the solvers: no tangents into their loops
+    y, ok, steps, r = fit_bundle(frozen, jax.lax.stop_gradient(l_n), jax.lax.stop_gradient(seeds), seed_ok, options)
+    y = (pin_params(y[0], problem), y[1])
     y = implicit_solution(y, problem)
     cov, s2, _ = covariance(y, problem, T)
     K, omega, vx, ls = solution_in_pixels(y, problem, T)
@@ -710,7 +805,7 @@ def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, opt
     r = residuals(y, problem)  # the same as the solver's, and differentiable
     rv = r.reshape(V, -1) * scale
     cost = jnp.sum(rv**2)
-    _, z, _ = _orthographic_fit(jax.lax.stop_gradient(y), fixed)
+    _, z, _ = _orthographic_fit(jax.lax.stop_gradient(y), frozen)
     # its cost at the fitted z (envelope theorem: z's own derivative does not enter)
     cost_o = jnp.sum(residuals(_orthographic_params(z, y[0], problem), problem) ** 2)
     evidence = cost_o * scale**2 - cost
@@ -831,7 +926,7 @@ class DistortedBundleOut(eqx.Module):
 
 @functools.partial(jax.jit, static_argnames=("distortion",))
 def bundle_estimate_distorted(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options: Options = Options(),
-                              distortion: str = "k1") -> DistortedBundleOut:
+                              distortion: str = "k1", fixed=None) -> DistortedBundleOut:
     """The joint bundle with OpenCV's radial distortion, ``2V + 4 + n`` parameters
     (``n = 1`` for "k1", 2 for "k1k2"; ``2V + 3 + n`` for a known aspect ratio): each
     sample ``x`` of an observed outline is undistorted, moved by its view's homology,
@@ -845,21 +940,24 @@ def bundle_estimate_distorted(points_n, used, inliers, l_n, seeds, seed_ok, aspe
     Args: as :func:`bundle_estimate` (``points_n`` (V, M, 2) observed, i.e. distorted,
     outline points in the normalised frame ``x_n = T x``; ``T`` (3, 3) the normalising
     similarity; ``seeds`` (S, 4) normalised; ``aspect`` NaN: free), and
-    ``distortion``: "k1" or "k1k2".
+    ``distortion``: "k1" or "k1k2"; ``fixed`` (4,) intrinsics held fixed, px, NaN:
+    free, as :func:`bundle_estimate`'s).
 
     Returns a :class:`DistortedBundleOut` (pixels; ``k`` dimensionless)."""
     n = DISTORTION_MODELS.get(distortion, 0)
     if n == 0:
         raise ValueError(f"distortion must be 'k1' or 'k1k2' (use bundle_estimate for none); got {distortion!r}")
-    free = bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options)
+    free = bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options, fixed)
     used = jnp.asarray(used, bool)
     T = jnp.asarray(T, jnp.float64)
-    base = make_problem(points_n, options.n_samples, aspect, inliers, used)
-    problem = BundleProblem(base.fields, base.samples, base.weights, base.aspect, n)
-    fixed = jax.lax.stop_gradient(problem)
+    base = make_problem(points_n, options.n_samples, aspect, inliers, used,
+                        None if fixed is None else fixed_chart(fixed, T))
+    problem = BundleProblem(base.fields, base.samples, base.weights, base.aspect, n, base.fixed)
+    frozen = jax.lax.stop_gradient(problem)
     y_seeds, ok_seeds = distorted_seeds(jax.lax.stop_gradient(free.y), jax.lax.stop_gradient(l_n), used,
                                         jax.lax.stop_gradient(seeds), seed_ok, n)
-    y, ok, steps = fit_distorted(fixed, y_seeds, ok_seeds, options)
+    y, ok, steps = fit_distorted(frozen, y_seeds, ok_seeds, options)
+    y = (pin_params(y[0], problem), y[1])
     y = implicit_solution(y, problem)
     cov, s2, _ = covariance(y, problem, T)
     K, omega, vx, ls = solution_in_pixels(y, problem, T)

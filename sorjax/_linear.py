@@ -223,3 +223,44 @@ def linear_estimates(v_pix, l_pix, used, T, aspect=1.0):
     free aspect ratio, IIb and I with ``aspect``)."""
     outs = [linear_estimate(v_pix, l_pix, used, T, aspect, method=m) for m in LINEAR_METHODS]
     return tuple(jnp.stack(x) for x in zip(*outs))
+
+
+@jax.jit
+def focal_from_principal_point(v_pix, l_pix, used, pp, aspect=1.0):
+    """The focal length ``f = fv`` (px, ``fu = aspect f``) from the used views' homologies
+    and a known principal point ``pp = (u0, v0)`` px: the single-view case of Wong,
+    Mendonca and Cipolla (IVC 2004), in least squares over the views.
+
+    With the principal point moved to the origin and the aspect map ``A = diag(1/a, 1,
+    1)`` applied (``v -> A v``, ``l -> A^-T l``, eqs. 24-26), ``omega = diag(w, w, 1)``
+    with ``w = 1 / f^2``, and the pole-polar relation ``omega v ~ l`` is
+    ``(omega v) x l = 0``, three equations linear in ``w`` (two independent)::
+
+        w (v2 l3, -v1 l3, v1 l2 - v2 l1) = (v3 l2, -v3 l1, 0)
+
+    (``v``, ``l`` scaled to unit norm).  One view gives two constraints on one unknown:
+    ``f^2 = dist(pp, v_x) dist(pp, l_s)`` (eq. 23) when the principal point lies on the
+    line through ``v_x`` orthogonal to ``l_s``; the component orthogonal to that is the
+    residual the bundle then minimises.  Stacked over the used views, ``w = sum A.b /
+    sum A.A``.  Degenerate: ``v_x`` at infinity (``v3 = 0``; then ``l_s`` passes through
+    the principal point, ``l3 = 0``): no equation involves ``w`` (the camera looks
+    straight at the axis; the focal length is free).
+
+    Pure (jit / vmap).  Returns ``(f, ok)``: ``ok`` when ``w > 0`` and finite (``w <= 0``:
+    ``v_x`` and ``l_s`` on the same side of the principal point, no real camera; ``w =
+    0``: every ``v_x`` at infinity)."""
+    used = jnp.asarray(used, bool)
+    v, l = masked_homologies(jnp.asarray(v_pix, jnp.float64), jnp.asarray(l_pix, jnp.float64), used)
+    pp = jnp.asarray(pp, jnp.float64)
+    a = jnp.asarray(aspect, jnp.float64)
+    # x' = A (x - pp): points by M = A Tr, lines by M^-T
+    M = _aspect_map(a) @ jnp.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]).at[:2, 2].set(-pp)
+    vn = _unit(v @ M.T)
+    ln = _unit(l @ jnp.linalg.inv(M))
+    A = jnp.stack([vn[:, 1] * ln[:, 2], -vn[:, 0] * ln[:, 2], vn[:, 0] * ln[:, 1] - vn[:, 1] * ln[:, 0]], axis=1)
+    b = jnp.stack([vn[:, 2] * ln[:, 1], -vn[:, 2] * ln[:, 0], jnp.zeros_like(vn[:, 0])], axis=1)
+    m = used[:, None].astype(jnp.float64)
+    den = jnp.sum(m * A * A)
+    w = jnp.sum(m * A * b) / jnp.where(den > 0, den, 1.0)
+    ok = (den > 0) & (w > 0) & jnp.isfinite(w) & jnp.all(jnp.isfinite(pp))
+    return jnp.where(ok, 1.0 / jnp.sqrt(jnp.where(ok, w, 1.0)), jnp.nan), ok

@@ -334,6 +334,21 @@ def _int_arg(lo: int, what: str):
 _nonnegative = _number_arg(0.0, False, "")
 
 
+def _finite_arg(what: str):
+    """An argparse type: any finite number."""
+
+    def parse(text: str) -> float:
+        try:
+            x = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+        if not np.isfinite(x):
+            raise argparse.ArgumentTypeError(f"must be a finite number ({what}), got {text!r}")
+        return x
+
+    return parse
+
+
 def _calibrate(args) -> int:
     import sorjax
 
@@ -353,10 +368,17 @@ def _calibrate(args) -> int:
         sources = list(labels)
         images, size = [], None
     print(f"{len(outlines)} outline(s) from {len(args.outlines)} file(s)")
+    principal_point = args.principal_point
+    if args.centre_principal_point:
+        if size is None:
+            raise ValueError("--centre-principal-point needs the image size, which outline files do not give: pass "
+                             "the images (with --masks), or --principal-point CX CY")
+        principal_point = "centre"
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         cal = sorjax.calibrate(outlines, method=args.method, aspect_ratio=args.aspect_ratio,
-                               outline_error=args.outline_error, image_size=size, distortion=args.distortion)
+                               outline_error=args.outline_error, image_size=size, distortion=args.distortion,
+                               principal_point=principal_point, focal_length=args.focal)
     for w in caught:
         print(f"warning: {w.message}", file=sys.stderr)
     used = set(cal.used)
@@ -381,8 +403,10 @@ def _calibrate(args) -> int:
         return 1
     std = cal.std
     print(f"method {cal.method}; views used {len(used)} of {len(outlines)}")
+    held = {"fu": cal.fixed_focal_length is not None, "fv": cal.fixed_focal_length is not None,
+            "u0": cal.fixed_principal_point is not None, "v0": cal.fixed_principal_point is not None}
     for n, v, s in zip(("fu", "fv", "u0", "v0"), (cal.fu, cal.fv, cal.u0, cal.v0), std):
-        print(f"  {n} = {v:10.3f} px" + (f"  +- {s:.3f}" if np.isfinite(s) else ""))
+        print(f"  {n} = {v:10.3f} px" + ("  (fixed)" if held[n] else f"  +- {s:.3f}" if np.isfinite(s) else ""))
     if cal.distortion is not None:
         for n, v, s in zip(("k1", "k2"), np.asarray(cal.distortion), np.asarray(cal.distortion_std)):
             print(f"  {n} = {v:10.5f}" + (f"     +- {s:.5f}" if np.isfinite(v) else "  (not determined)"))
@@ -463,6 +487,17 @@ def main(argv=None) -> int:
     c.add_argument("--distortion", choices=("none", "k1", "k1k2"), default="none",
                    help="lens model: none (pinhole, default), k1 or k1k2 (OpenCV's radial terms, estimated by the "
                         "bundle and written to the camera file)")
+    pp = c.add_mutually_exclusive_group()
+    pp.add_argument("--principal-point", nargs=2, type=_finite_arg("the principal point (px)"), default=None,
+                    metavar=("CX", "CY"), help="hold the principal point fixed at (CX, CY) px (OpenCV's "
+                    "CALIB_FIX_PRINCIPAL_POINT); one outline is then enough for the focal length")
+    pp.add_argument("--centre-principal-point", action="store_true",
+                    help="hold the principal point fixed at the image centre ((width - 1) / 2, (height - 1) / 2); "
+                         "needs images")
+    c.add_argument("--focal", type=_number_arg(0.0, True, "the focal length fv (px)"), default=None, metavar="F",
+                   help="hold the focal length fv fixed at F px (fu = aspect ratio x F, the aspect ratio 1 unless "
+                        "--aspect-ratio; OpenCV's CALIB_FIX_FOCAL_LENGTH): only the principal point (and the "
+                        "distortion) is estimated")
     c.add_argument("--outline-error", type=_nonnegative, default=0.1, metavar="PX",
                    help="systematic error of the outlines in px that their symmetry does not show "
                         "(segmentation, lens distortion); the outlines must show 3x this much perspective "

@@ -281,7 +281,8 @@ def _model_checks(out, scores, free_fit, aspect, c: _Common, options: Options, f
     S, delta, n = scores
     free_out = free_fit[0]
     a_free, a_std, a_z, a_px, a_rej, a_beyond = fixed_aspect_check(
-        aspect, out.K, out.cost, free_out.K, free_out.cov, free_out.cost, free_out.ok, out.n, options)
+        aspect, out.K, out.cost, free_out.K, free_out.cov, free_out.cost, free_out.ok, out.n, options,
+        free_s2=free_out.s2)
     dof, p, g, v_rej, v_beyond, birge = consistency(S, delta, n, c.used, aspect, options, fixed)
     est = jnp.stack([out.K[0, 0], out.K[1, 1], out.K[0, 2], out.K[1, 2]])
     est_free = jnp.stack([free_out.K[0, 0], free_out.K[1, 1], free_out.K[0, 2], free_out.K[1, 2]])
@@ -330,6 +331,10 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
     if bundle is not None:
         out, scores = bundle
         K, omega, ok = out.K, out.omega, out.ok
+        if fixed is not None:  # the values held fixed, exactly as given (not through log / exp and T)
+            fu_fixed = jnp.where(jnp.isfinite(fixed[0]), fixed[0], jnp.where(focal_fixed, aspect * fixed[1], jnp.nan))
+            Kf = intrinsics_matrix(fu_fixed, fixed[1], fixed[2], fixed[3])
+            K = jnp.where(jnp.isfinite(Kf), Kf, K)
         if scores is None:  # (the model checks of the pinhole bundle do not apply)
             checks, cov = _no_checks(aspect, c, options), out.cov
         else:
