@@ -403,8 +403,9 @@ def _calibrate(args) -> int:
         return 1
     std = cal.std
     print(f"method {cal.method}; views used {len(used)} of {len(outlines)}")
-    held = {"fu": cal.fixed_focal_length is not None, "fv": cal.fixed_focal_length is not None,
-            "u0": cal.fixed_principal_point is not None, "v0": cal.fixed_principal_point is not None}
+    f_held = getattr(cal, "fixed_focal_length", None) is not None
+    pp_held = getattr(cal, "fixed_principal_point", None) is not None
+    held = {"fu": f_held, "fv": f_held, "u0": pp_held, "v0": pp_held}
     for n, v, s in zip(("fu", "fv", "u0", "v0"), (cal.fu, cal.fv, cal.u0, cal.v0), std):
         print(f"  {n} = {v:10.3f} px" + ("  (fixed)" if held[n] else f"  +- {s:.3f}" if np.isfinite(s) else ""))
     if cal.distortion is not None:
