@@ -408,14 +408,15 @@ def _calibrate(args) -> int:
     held = {"fu": f_held, "fv": f_held, "u0": pp_held, "v0": pp_held}
     for n, v, s in zip(("fu", "fv", "u0", "v0"), (cal.fu, cal.fv, cal.u0, cal.v0), std):
         print(f"  {n} = {v:10.3f} px" + ("  (fixed)" if held[n] else f"  +- {s:.3f}" if np.isfinite(s) else ""))
-    if cal.distortion is not None:
+    if getattr(cal, "distortion", None) is not None:
         for n, v, s in zip(("k1", "k2"), np.asarray(cal.distortion), np.asarray(cal.distortion_std)):
             print(f"  {n} = {v:10.5f}" + (f"     +- {s:.5f}" if np.isfinite(v) else "  (not determined)"))
     print("K =")
     print(np.array2string(np.asarray(cal.K), precision=3, suppress_small=True))
     if np.isfinite(cal.perspective_px):
         print(f"perspective shown by the outlines: {cal.perspective_px:.3g} px RMS (z = {cal.perspective_z:.3g}; "
-              f"the focal length needs >= {3 * cal.outline_error:.3g} px, 3 x the outline error)")
+              f"the focal length needs >= {3 * getattr(cal, 'outline_error', args.outline_error):.3g} px, 3 x the "
+              "outline error)")
     if plan is not None:
         if size is None:
             pts = np.concatenate([np.asarray(o).reshape(-1, 2) for o in outlines])
