@@ -796,27 +796,34 @@ def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, opt
                            None if fixed is None else fixed_chart(fixed, T))
     frozen = jax.lax.stop_gradient(problem)  # the solvers: no tangents into their loops
     y, ok, steps, r = fit_bundle(frozen, jax.lax.stop_gradient(l_n), jax.lax.stop_gradient(seeds), seed_ok, options)
+    out, _ = _solved(y, problem, T, used, steps, ok)
+    y = out.y
+    _, z, _ = _orthographic_fit(jax.lax.stop_gradient(y), frozen)
+    # its cost at the fitted z (envelope theorem: z's own derivative does not enter)
+    cost_o = jnp.sum(residuals(_orthographic_params(z, y[0], problem), problem) ** 2)
+    return eqx.tree_at(lambda b: b.evidence, out, cost_o / T[0, 0] ** 2 - out.cost)
+
+
+def _solved(y, problem: BundleProblem, T, used, steps, ok):
+    """A solver's end ``y`` as a :class:`BundleOut` (its ``evidence`` NaN, for the
+    caller to fill) and the covariance of every intrinsic parameter (px; with
+    distortion the coefficients follow): the fixed entries pinned, the optimum made
+    differentiable (:func:`implicit_solution`), the residuals in pixels."""
     y = (pin_params(y[0], problem), y[1])
     y = implicit_solution(y, problem)
     cov, s2, _ = covariance(y, problem, T)
     K, omega, vx, ls = solution_in_pixels(y, problem, T)
     scale = 1.0 / T[0, 0]
-    V = used.shape[0]
-    r = residuals(y, problem)  # the same as the solver's, and differentiable
-    rv = r.reshape(V, -1) * scale
-    cost = jnp.sum(rv**2)
-    _, z, _ = _orthographic_fit(jax.lax.stop_gradient(y), frozen)
-    # its cost at the fitted z (envelope theorem: z's own derivative does not enter)
-    cost_o = jnp.sum(residuals(_orthographic_params(z, y[0], problem), problem) ** 2)
-    evidence = cost_o * scale**2 - cost
+    rv = residuals(y, problem).reshape(used.shape[0], -1) * scale  # the solver's, differentiable
     nan = jnp.asarray(jnp.nan)
-    return BundleOut(
+    out = BundleOut(
         y=y, K=K, omega=omega,
         v_x=jnp.where(used[:, None], vx, nan), l_s=jnp.where(used[:, None], ls, nan),
-        cov=cov, s2=s2 * scale**2, cost=cost,
+        cov=cov[:4, :4], s2=s2 * scale**2, cost=jnp.sum(rv**2),
         view_rms=jnp.where(used, jnp.sqrt(jnp.mean(rv**2, axis=1)), nan),
-        steps=steps, ok=ok & jnp.all(jnp.isfinite(K)), evidence=evidence, n=jnp.sum(problem.weights),
+        steps=steps, ok=ok & jnp.all(jnp.isfinite(K)), evidence=nan, n=jnp.sum(problem.weights),
     )
+    return out, cov
 
 
 # ------------------------------------------------------------ radial distortion (issue 18)
@@ -957,23 +964,10 @@ def bundle_estimate_distorted(points_n, used, inliers, l_n, seeds, seed_ok, aspe
     y_seeds, ok_seeds = distorted_seeds(jax.lax.stop_gradient(free.y), jax.lax.stop_gradient(l_n), used,
                                         jax.lax.stop_gradient(seeds), seed_ok, n)
     y, ok, steps = fit_distorted(frozen, y_seeds, ok_seeds, options)
-    y = (pin_params(y[0], problem), y[1])
-    y = implicit_solution(y, problem)
-    cov, s2, _ = covariance(y, problem, T)
-    K, omega, vx, ls = solution_in_pixels(y, problem, T)
-    scale = 1.0 / T[0, 0]
-    V = used.shape[0]
-    rv = residuals(y, problem).reshape(V, -1) * scale
-    cost = jnp.sum(rv**2)
-    nan = jnp.asarray(jnp.nan)
-    ok = ok & jnp.all(jnp.isfinite(K)) & jnp.all(jnp.isfinite(y[0]))
-    fit = BundleOut(
-        y=y, K=K, omega=omega,
-        v_x=jnp.where(used[:, None], vx, nan), l_s=jnp.where(used[:, None], ls, nan),
-        cov=cov[:4, :4], s2=s2 * scale**2, cost=cost,
-        view_rms=jnp.where(used, jnp.sqrt(jnp.mean(rv**2, axis=1)), nan),
-        steps=steps, ok=ok, evidence=free.evidence + free.cost - cost, n=jnp.sum(problem.weights),
-    )
+    fit, cov = _solved(y, problem, T, used, steps, ok)
+    y, cost = fit.y, fit.cost
+    ok = fit.ok & jnp.all(jnp.isfinite(y[0]))
+    fit = eqx.tree_at(lambda b: (b.ok, b.evidence), fit, (ok, free.evidence + free.cost - cost))
     k = split_params(y[0], problem)[1]
     return DistortedBundleOut(fit=fit, k=k, k_std=jnp.sqrt(jnp.diagonal(cov)[4:]), cov=cov, free=free,
                               delta=free.cost - cost, ok=ok & free.ok)

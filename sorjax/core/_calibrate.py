@@ -41,6 +41,11 @@ def _nan(shape):
     return jnp.full(shape, jnp.nan)
 
 
+def _intrinsics(K):
+    """``(fu, fv, u0, v0)`` of a (3, 3) ``K`` (px)."""
+    return jnp.stack([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
+
+
 def calibrate(points: Float[Array, "V M 2"], method: str = "bundle", aspect=jnp.nan, *, options: Options = Options(),
               image_size=None, valid=None, distortion: str = "none", fixed=None) -> CoreResult:
     """Calibrate from ``V`` outlines of ``M`` evenly spaced pixel points each (e.g.
@@ -138,8 +143,7 @@ def _distorted(c: _Common, homs: ViewHomologies, aspect, options: Options, disto
     fit, free = d.fit, d.free
     gate, g, z = distortion_gate(d.delta, fit.n, jnp.sqrt(fit.s2), options)
     gate = gate & d.ok
-    est = lambda K: jnp.stack([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])  # noqa: E731
-    dd = jnp.where(jnp.all(jnp.isfinite(fit.K)), est(fit.K) - est(free.K), jnp.inf)
+    dd = jnp.where(jnp.all(jnp.isfinite(fit.K)), _intrinsics(fit.K) - _intrinsics(free.K), jnp.inf)
     widened = eqx.tree_at(lambda b: b.cov, free, free.cov + jnp.outer(dd, dd))
     fit = eqx.tree_at(lambda b: b.y, fit, free.y)  # (the charts differ in size; y is not used beyond here)
     out = jax.tree_util.tree_map(lambda a, b: jnp.where(gate, a, b), fit, widened)
@@ -284,9 +288,7 @@ def _model_checks(out, scores, free_fit, aspect, c: _Common, options: Options, f
         aspect, out.K, out.cost, free_out.K, free_out.cov, free_out.cost, free_out.ok, out.n, options,
         free_s2=free_out.s2)
     dof, p, g, v_rej, v_beyond, birge = consistency(S, delta, n, c.used, aspect, options, fixed)
-    est = jnp.stack([out.K[0, 0], out.K[1, 1], out.K[0, 2], out.K[1, 2]])
-    est_free = jnp.stack([free_out.K[0, 0], free_out.K[1, 1], free_out.K[0, 2], free_out.K[1, 2]])
-    d = jnp.where(a_rej & ~a_beyond, est - est_free, 0.0)
+    d = jnp.where(a_rej & ~a_beyond, _intrinsics(out.K) - _intrinsics(free_out.K), 0.0)
     inflation = jnp.where(v_rej & ~v_beyond, jnp.maximum(birge, 1.0), 1.0)
     cov = out.cov * inflation + jnp.outer(d, d)
     contradicted = a_beyond | v_beyond
@@ -364,7 +366,7 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
         dist_k, dist_std, dist_g, dist_z = jnp.zeros(2), jnp.zeros(2), nan, nan
     else:
         dist_k, dist_std, dist_g, dist_z = distortion
-    est = jnp.stack([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
+    est = _intrinsics(K)
     verdict = assess(est, cov_unit, s_px, jnp.sqrt(jnp.sum(jnp.where(used, radius**2, 0.0)) / jnp.maximum(n_used, 1)),
                      outline_extent(points, used), image_size, free_aspect, all_inf, persp_ok, options)
     determined = verdict.determined & assessed
