@@ -25,7 +25,7 @@ from ._checks import check_sizes
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
 from ._outline import DEFAULT_POINTS, as_outlines, implied_outline_error
 from .core._assess import ASYMMETRIC, COLLAPSED_FOCAL, CONIC, DUPLICATE, MASKED, PP_OUTSIDE, TRIMMED, USED, WIDE_FOV
-from .core._checks import CULPRIT_ASPECT, CULPRIT_VIEWS, MODEL_CONTRADICTED, MODEL_WIDENED, ModelChecks
+from .core._checks import CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, CULPRIT_VIEWS, MODEL_CONTRADICTED, MODEL_WIDENED, ModelChecks
 from .core._calibrate import calibrate_homologies, calibrate_methods
 from .core._options import Options
 from .core._result import RESULTS
@@ -546,6 +546,29 @@ def _views_text(ch) -> str:
             + _worst_views(ch))
 
 
+def _released(p, px) -> bool:
+    """Whether a release test (:func:`sorjax.core._checks.release_score`) rejected the
+    held values: ``p < consistency_p`` with evidence above ``check_floor_px``."""
+    o = Options()
+    return bool(np.isfinite(float(p)) and float(p) < o.consistency_p and float(px) >= o.check_floor_px)
+
+
+def _lens_text(ch) -> str:
+    return (f"the outlines show radial lens distortion, which the pinhole model (distortion='none') holds at zero: "
+            f"with k1 released they fit {float(ch.lens_px):.2g} px RMS better (score test p = "
+            f"{float(ch.lens_p):.2g}), and one step of the released model gives k1 = {float(ch.lens_k1):.3g}")
+
+
+def _fixed_text(ch, fixed) -> str:
+    names = [n for n, v in zip(_NAMES, fixed) if np.isfinite(v)] if fixed is not None else []
+    held = ", ".join(f"{n} = {v:.6g}" for n, v in zip(_NAMES, fixed) if np.isfinite(v)) if names else "the fixed values"
+    shift = np.asarray(ch.fixed_shift, float)
+    moves = ", ".join(f"{n} by {d:+.3g}" for n, d in zip(_NAMES, shift) if np.isfinite(d) and abs(d) > 0)
+    return (f"the fixed intrinsics ({held} px) are not what the outlines show: released they fit "
+            f"{float(ch.fixed_px):.2g} px RMS better (score test p = {float(ch.fixed_p):.2g}), and one step of the "
+            f"released model moves {moves or 'nothing'} px")
+
+
 def distortion_notes(r, distortion: str, outline_error: float) -> list[str]:
     """The warning of a distortion model the outlines do not support (the
     distortion-free K returned, its std widened), from the core's result ``r``."""
@@ -563,9 +586,10 @@ def distortion_notes(r, distortion: str, outline_error: float) -> list[str]:
             "and corners, where distortion is strongest."]
 
 
-def model_notes(r, outline_error: float) -> list[str]:
+def model_notes(r, outline_error: float, fixed=None) -> list[str]:
     """The warning of a calibration whose model the outlines do not confirm (the
-    uncertainty widened: :mod:`sorjax.core._checks`), from the core's result ``r``."""
+    uncertainty widened: :mod:`sorjax.core._checks`), from the core's result ``r``;
+    ``fixed``: the intrinsics held fixed (px, NaN: free) or None."""
     ch = r.checks
     if int(ch.verdict) != MODEL_WIDENED or code_name(r.result) not in ("successful", "degenerate",
                                                                       "only_principal_point"):
@@ -576,6 +600,16 @@ def model_notes(r, outline_error: float) -> list[str]:
             _aspect_text(ch) + f", within what the declared outline error ({float(outline_error):g} px) could "
             "cause. The standard deviations include the difference between the fixed and the free estimates; "
             "if the aspect ratio is not known exactly, pass aspect_ratio=None.")
+    if _released(ch.lens_p, ch.lens_px):
+        notes.append(
+            _lens_text(ch) + f", within what the declared outline error ({float(outline_error):g} px) could cause. "
+            "The standard deviations include the shift of K that this step makes. Calibrate with distortion='k1' "
+            "(command line: --distortion k1) to estimate the distortion with K.")
+    if _released(ch.fixed_p, ch.fixed_px):
+        notes.append(
+            _fixed_text(ch, fixed) + f", within what the declared outline error ({float(outline_error):g} px) "
+            "could cause. The standard deviations include that shift; if these values are not known exactly, "
+            "leave them free.")
     if float(ch.inflation) > 1.0:
         notes.append(
             _views_text(ch) + f". The standard deviations are scaled by sqrt({float(ch.inflation):.3g}) (the "
@@ -584,9 +618,11 @@ def model_notes(r, outline_error: float) -> list[str]:
     return notes
 
 
-def details_for(r, h, points, method: str, a, outline_error: float, image_size=None, fixed_pp=None) -> str:
+def details_for(r, h, points, method: str, a, outline_error: float, image_size=None, fixed_pp=None,
+                fixed=None) -> str:
     """What is specific to a result that is not a plain success (``Calibration.details``);
-    ``fixed_pp``: the principal point held fixed (px) or None."""
+    ``fixed_pp``: the principal point held fixed (px) or None; ``fixed``: every
+    intrinsic held fixed (px, NaN: free) or None."""
     name = code_name(r.result)
     if name == "inconsistent":
         ch = r.checks
@@ -595,6 +631,14 @@ def details_for(r, h, points, method: str, a, outline_error: float, image_size=N
             return (_aspect_text(ch) + f", more than the declared outline error ({float(outline_error):g} px; "
                     f"needs < {lim} px) can explain. Pass aspect_ratio=None to estimate it, or the right value "
                     "(resized or non-square-pixel images have fu / fv != 1).")
+        if int(ch.culprit) == CULPRIT_LENS:
+            return (_lens_text(ch) + f", more than the declared outline error ({float(outline_error):g} px; needs "
+                    f"< {lim} px) can explain. Calibrate with distortion='k1' (command line: --distortion k1; "
+                    "'k1k2' for a strong wide-angle lens), or undistort the images first.")
+        if int(ch.culprit) == CULPRIT_FIXED:
+            return (_fixed_text(ch, fixed) + f", more than the declared outline error ({float(outline_error):g} "
+                    f"px; needs < {lim} px) can explain. Leave them free, or give the right values (a cropped or "
+                    "resized image moves the principal point and scales the focal length).")
         return (_views_text(ch) + f", more than the declared outline error ({float(outline_error):g} px; needs < "
                 f"{lim} px) can explain. Were all views taken with the same camera and zoom, uncropped and "
                 "unresized? Is every outline a surface of revolution (not a flat symmetric shape)? Leave out the "
@@ -894,12 +938,12 @@ def calibrate(
                   (math.nan, math.nan) if image_size is None else image_size, distortion, fixed)
 
     dup_of = np.asarray(r.checks.duplicate_of)
-    notes = (floor_note + view_notes(homs, r.drop_reason, dup_of=dup_of) + model_notes(r, outline_error)
+    notes = (floor_note + view_notes(homs, r.drop_reason, dup_of=dup_of) + model_notes(r, outline_error, fixed)
              + distortion_notes(r, distortion, outline_error) + verdict_notes(r, method, a, outs))
     for msg in notes:
         warnings.warn(msg, stacklevel=2)
     used = tuple(int(i) for i in np.flatnonzero(r.used))
-    details = details_for(r, homs, outs, method, a, outline_error, image_size, pp_fixed)
+    details = details_for(r, homs, outs, method, a, outline_error, image_size, pp_fixed, fixed)
     cal = Calibration(
         jnp.asarray(r.K), jnp.asarray(r.omega), homologies, _code_item(r.result), jnp.asarray(r.covariance),
         jnp.asarray(r.cost), jnp.asarray(r.view_rms[r.used]), jnp.asarray(r.steps), jnp.asarray(r.v_x[r.used]),

@@ -118,11 +118,50 @@ def clip_line(l, w, h):
     return (pts[0], pts[-1]) if len(pts) >= 2 else None
 
 
-def draw_overlay(image, views, path) -> Path:
+def _lens_maps(lens):
+    """``(distort, undistort)`` of pixel points (numpy in, numpy out) for ``lens = (K,
+    k)`` (the pinhole intrinsics, px, and OpenCV's radial coefficients), or the
+    identity for None."""
+    if lens is None:
+        ident = lambda x: np.asarray(x, np.float64)  # noqa: E731
+        return ident, ident
+    from ._distortion import distort, undistort
+
+    K, k = (np.asarray(a, np.float64) for a in lens)
+    return (lambda x: np.asarray(distort(np.asarray(x, np.float64), K, k)),
+            lambda x: np.asarray(undistort(np.asarray(x, np.float64), K, k)))
+
+
+def mirror_pairs(outline, l, v, lens=None, count: int = 5):
+    """``count`` points ``x`` spread along ``outline`` (px) and their mirror images
+    ``W x`` by the harmonic homology of axis ``l`` and vertex ``v`` (homogeneous,
+    pixels) -- ``D(W D^-1(x))`` through the radial distortion of ``lens = (K, k)``
+    when given (``l``, ``v`` then of the pinhole image): ``(x (n, 2), W x (n, 2))``,
+    the points whose image is at infinity left out.  On a symmetric outline each ``W
+    x`` lies on the outline again."""
+    from ._homology import homology_matrix
+
+    o = np.asarray(outline, np.float64)
+    dist, undist = _lens_maps(lens)
+    W = np.asarray(homology_matrix(np.asarray(v, np.float64), np.asarray(l, np.float64)))
+    ps = o[np.linspace(0, len(o), count + 1, endpoint=False).astype(int)[1:]]
+    qh = np.c_[undist(ps), np.ones(len(ps))] @ W.T
+    ok = np.abs(qh[:, 2]) > 1e-12 * np.linalg.norm(qh, axis=1)
+    qs = dist(qh[ok, :2] / qh[ok, 2:]) if ok.any() else np.zeros((0, 2))
+    return ps[ok], qs
+
+
+def draw_overlay(image, views, path, lens=None) -> Path:
     """Draw each view's outline (green), its axis ``l_s`` (magenta), five transferred
     point pairs ``x <-> W x`` (yellow) and an arrow towards ``v_x`` (red) on a copy of
     ``image`` (BGR) and write it to ``path``.  ``views``: ``(outline, l_s, v_x, label)``
-    in pixels."""
+    in pixels.
+
+    ``lens``: ``(K, k)`` when the calibration estimated radial distortion (``K`` the
+    pinhole intrinsics, px; ``k`` OpenCV's radial coefficients): ``l_s`` and ``v_x``
+    are then those of the pinhole (undistorted) image, and the overlay shows them in
+    the distorted photograph: the axis as the curve ``D(l_s)`` (points of the line,
+    distorted), each pair as ``x <-> D(W D^-1(x))`` (:func:`sorjax._distortion.distort`)."""
     import cv2
 
     img = np.ascontiguousarray(image).copy()
@@ -133,26 +172,30 @@ def draw_overlay(image, views, path) -> Path:
     h, w = img.shape[:2]
     sh = 4  # fixed-point bits for sub-pixel drawing
     pix = lambda p: tuple(int(round(c * (1 << sh))) for c in p)  # noqa: E731
+    dist, undist = _lens_maps(lens)
     for outline, l, v, label in views:
         o = np.asarray(outline, dtype=np.float64)
         cv2.polylines(img, [np.round(o * (1 << sh)).astype(np.int32)], True, (0, 200, 0), 1, cv2.LINE_AA, sh)
         if l is None:
             continue
         l, v = np.asarray(l, dtype=np.float64), np.asarray(v, dtype=np.float64)
+        # the axis, clipped to the image in the undistorted frame (the distortion is
+        # mild at the border) and drawn as a polyline through 64 of its points
         seg = clip_line(l, w, h)
         if seg:
-            cv2.line(img, pix(seg[0]), pix(seg[1]), (255, 0, 255), 1, cv2.LINE_AA, sh)
-        W = np.eye(3) - 2.0 * np.outer(v, l) / (v @ l)
-        for p in o[np.linspace(0, len(o), 6, endpoint=False).astype(int)[1:]]:
-            q = W @ np.array([p[0], p[1], 1.0])
-            if abs(q[2]) > 1e-12:
-                q = q[:2] / q[2]
-                cv2.line(img, pix(p), pix(q), (0, 220, 255), 1, cv2.LINE_AA, sh)
-                cv2.circle(img, pix(q), 3 << sh, (0, 220, 255), 1, cv2.LINE_AA, sh)
+            t = np.linspace(0.0, 1.0, 64 if lens is not None else 2)[:, None]
+            curve = dist((1.0 - t) * np.asarray(seg[0]) + t * np.asarray(seg[1]))
+            cv2.polylines(img, [np.round(curve * (1 << sh)).astype(np.int32)], False, (255, 0, 255), 1,
+                          cv2.LINE_AA, sh)
+        for p, q in zip(*mirror_pairs(o, l, v, lens)):
+            cv2.line(img, pix(p), pix(q), (0, 220, 255), 1, cv2.LINE_AA, sh)
+            cv2.circle(img, pix(q), 3 << sh, (0, 220, 255), 1, cv2.LINE_AA, sh)
         c = o.mean(0)
-        d = v[:2] - c * v[2]
+        cu = undist(c[None])[0]
+        d = v[:2] - cu * v[2]
         d = d / (np.linalg.norm(d) + 1e-300)
-        cv2.arrowedLine(img, pix(c), pix(c + 50 * d), (0, 0, 255), 2, cv2.LINE_AA, sh, 0.3)
+        tip = dist((cu + 50 * d)[None])[0]
+        cv2.arrowedLine(img, pix(c), pix(tip), (0, 0, 255), 2, cv2.LINE_AA, sh, 0.3)
         cv2.putText(img, label, (int(c[0]) + 5, int(c[1]) - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 255), 1,
                     cv2.LINE_AA)
     path = Path(path)

@@ -280,8 +280,8 @@ def _views_from_images(args, labels: list[str]):
 OVERLAY_MAX_SIDE = 8192  # px: a larger photograph's overlay is drawn on it read grey at 1/2, 1/4 or 1/8 of its size
 
 
-def _overlay(f: str, views, png: Path, size) -> None:
-    """Draw the overlay of image ``f`` (``views`` in its pixels, as for
+def _overlay(f: str, views, png: Path, size, lens=None) -> None:
+    """Draw the overlay of image ``f`` (``views`` in its pixels and ``lens``, as for
     :func:`sorjax._camera_io.draw_overlay`) into ``png``; an image larger than
     ``OVERLAY_MAX_SIDE`` is read grey and reduced by OpenCV and the views scaled to it
     (OpenCV decodes the whole image whatever the reduction: a 20000 x 20000 photograph
@@ -296,8 +296,10 @@ def _overlay(f: str, views, png: Path, size) -> None:
     if k > 1:  # pixel centres: x' = (x + 0.5) / k - 0.5
         S = np.array([[1.0 / k, 0.0, 0.5 / k - 0.5], [0.0, 1.0 / k, 0.5 / k - 0.5], [0.0, 0.0, 1.0]])
         ST = np.linalg.inv(S).T
-        views = [((np.asarray(o) + 0.5) / k - 0.5, ST @ l, S @ v, lab) for o, l, v, lab in views]
-    draw_overlay(_read_image(f, flag), views, png)
+        views = [((np.asarray(o) + 0.5) / k - 0.5, None if l is None else ST @ l, None if v is None else S @ v, lab)
+                 for o, l, v, lab in views]
+        lens = None if lens is None else (S @ lens[0], lens[1])  # K' = S K: the same normalised coordinates
+    draw_overlay(_read_image(f, flag), views, png, lens)
 
 
 def _number_arg(lo: float, lo_open: bool, what: str):
@@ -389,13 +391,23 @@ def _calibrate(args) -> int:
         status = "used" if i in used else f"dropped: {dropped.get(i, 'not used')}"
         r = rms.get(i, float(cal.homologies[i].rms))
         print(f" {i:4d}  {src if len(src) <= 30 else '...' + src[-27:]:30s}  {r:17.3f}  {status}")
+    k_lens = getattr(cal, "distortion", None)
+    lens = (np.asarray(cal.K), np.asarray(k_lens)) if (
+        cal.success and k_lens is not None and np.all(np.isfinite(np.asarray(k_lens)))) else None
     if plan is not None and images:
         for (f, first, n), png in zip(images, plan[2]):
             views = []
             for i in range(first, first + n):
                 h = cal.homologies[i]
-                views.append((outlines[i], np.asarray(h.l_s), np.asarray(h.v_x), f"{i}" + ("" if i in used else " (dropped)")))
-            _overlay(f, views, png, size)
+                label = f"{i}" + ("" if i in used else " (dropped)")
+                if lens is None:
+                    views.append((outlines[i], np.asarray(h.l_s), np.asarray(h.v_x), label))
+                elif i in used:  # the bundle's axis and vertex, of the pinhole image
+                    j = list(cal.used).index(i)
+                    views.append((outlines[i], np.asarray(cal.l_s[j]), np.asarray(cal.v_x[j]), label))
+                else:  # its own fit is of the distorted outline: the outline only
+                    views.append((outlines[i], None, None, label))
+            _overlay(f, views, png, size, lens)
     if not cal.success:
         print(f"calibration failed: {cal.message}", file=sys.stderr)
         if getattr(cal, "details", ""):

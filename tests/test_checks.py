@@ -144,3 +144,48 @@ def test_no_false_alarm_on_consistent_noisy_views(square):
         cal, _ = quiet(outs, outline_error=0.0)
         assert cal.success and int(cal.checks.verdict) == MODEL_OK, (t, cal.checks)
         assert float(cal.checks.consistency_p) > 1e-4
+        assert float(cal.checks.lens_p) > 1e-4  # no lens distortion seen where there is none
+
+
+@pytest.fixture(scope="module")
+def barrel():
+    # a mild barrel distortion (k1 = -0.05, a webcam's) on off-centre objects: the
+    # pinhole bundle alone gave K 8.8 % off at a std of about 1 % (issue 18)
+    return scenes.random_sor_scene(1801, 4, distortion=(-0.05, 0.0))
+
+
+def test_lens_distortion_widens_within_the_outline_error(barrel):
+    cal, notes = quiet(list(barrel.outlines))
+    assert int(cal.checks.verdict) == MODEL_WIDENED, cal.checks
+    assert any("radial lens distortion" in n and "distortion='k1'" in n for n in notes), notes
+    assert not_confidently_wrong(cal, barrel.K)
+    assert float(cal.checks.lens_k1) == pytest.approx(-0.05, abs=0.02)  # one Gauss-Newton step
+    assert float(cal.checks.lens_p) < 1e-10
+
+
+def test_lens_distortion_beyond_the_outline_error_is_refused(barrel):
+    cal = sorjax.calibrate(list(barrel.outlines), outline_error=0.0)
+    assert cal.result == sorjax.RESULTS.inconsistent and np.isnan(cal.fv)
+    assert "radial lens distortion" in cal.message and "--distortion k1" in cal.message
+    # ... and with the distortion estimated, the same outlines calibrate (issue 18)
+    cal = sorjax.calibrate(list(barrel.outlines), outline_error=0.0, distortion="k1")
+    assert cal.success and abs(cal.fv - barrel.K[1, 1]) < 1e-3 * barrel.K[1, 1]
+
+
+def test_fixed_principal_point_is_checked(square):
+    K = square.K
+    cal, notes = quiet(square.outlines, principal_point=(K[0, 2], K[1, 2]))
+    assert cal.success and int(cal.checks.verdict) == MODEL_OK, (notes, cal.checks)
+    assert float(cal.checks.fixed_p) > 1e-4
+    cal, notes = quiet(square.outlines, principal_point=(K[0, 2] + 3.0, K[1, 2] - 3.0))
+    assert not_confidently_wrong(cal, K)
+    if cal.success:
+        assert int(cal.checks.verdict) == MODEL_WIDENED and any("fixed intrinsics" in n for n in notes), notes
+    # 20 px off: the outlines fit 0.07 px RMS better released, within 3 x 0.1 px of
+    # declared outline error (widened), beyond exact outlines' (refused)
+    off = (K[0, 2] + 20.0, K[1, 2] - 20.0)
+    cal, notes = quiet(square.outlines, principal_point=off)
+    assert not_confidently_wrong(cal, K) and int(cal.checks.verdict) == MODEL_WIDENED
+    cal = sorjax.calibrate(square.outlines, principal_point=off, outline_error=0.0)
+    assert cal.result == sorjax.RESULTS.inconsistent, cal.message
+    assert "fixed intrinsics (u0 = 340, v0 = 220 px)" in cal.message

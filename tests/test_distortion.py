@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from sorjax import scenes
 from sorjax._distortion import (distort, distort_normalised, monotone_radius, opencv_coefficients, undistort,
                                 undistort_normalised)
 
@@ -251,3 +252,40 @@ def test_render_with_distortion_undistorts_to_the_pinhole_render():
     img = cv2.undistort(dis.image, dis.K, dist).astype(float)
     assert np.mean(np.abs(img - pin.image)[inner]) < 0.5  # grey levels: resampling only
     assert np.mean(np.abs(dis.image.astype(float) - pin.image)[inner]) > 1.0
+
+
+def test_overlay_pairs_in_the_distorted_image():
+    # the overlay's transferred points x -> D(W D^-1 x) land on the distorted outline
+    # with the true lens; drawn as a pinhole's (x -> W x) they miss it by pixels
+    from sorjax._camera_io import mirror_pairs
+
+    def dist(q, o):  # each point's distance to the closed polygon o
+        a, b = o, np.roll(o, -1, axis=0)
+        t = np.clip(np.einsum("qnk,nk->qn", q[:, None] - a, b - a) / np.sum((b - a) ** 2, -1), 0, 1)
+        return np.min(np.linalg.norm(a + t[..., None] * (b - a) - q[:, None], axis=-1), axis=1)
+
+    sc = scenes.random_sor_scene(1801, 4, distortion=(-0.15, 0.0))
+    lens = (sc.K, np.array(sc.distortion))
+    for view in sc.views:
+        o = view.outline
+        p, q = mirror_pairs(o, view.l_s, view.v_x, lens, count=16)
+        assert len(q) >= 12
+        d = dist(q, o)
+        assert d.max() < 0.005, d
+    # (the views of this scene: 0.02, 1.1, 5.4 and 12 px off as a pinhole's)
+    d0 = [dist(mirror_pairs(v.outline, v.l_s, v.v_x, None, count=16)[1], v.outline).max() for v in sc.views]
+    assert max(d0) > 5.0
+
+
+def test_overlay_drawn_with_a_lens(tmp_path):
+    import cv2
+
+    from sorjax._camera_io import draw_overlay
+
+    sc = scenes.random_sor_scene(1801, 2, distortion=(-0.15, 0.0))
+    w, h = sc.image_size
+    img = np.zeros((h, w, 3), np.uint8)
+    views = [(v.outline, v.l_s, v.v_x, str(i)) for i, v in enumerate(sc.views)]
+    png = draw_overlay(img, views, tmp_path / "o.png", lens=(sc.K, np.array(sc.distortion)))
+    out = cv2.imread(str(png))
+    assert out.shape == img.shape and (out[..., 1] > 100).any()  # the outlines, green

@@ -27,8 +27,9 @@ from .._camera import intrinsics_matrix, transform_points
 from .._linear import linear_estimate
 from ._assess import (DUPLICATE, USED, assess, axes_intersection, outline_extent, outline_radius,
                       perspective_gate, view_verdicts)
-from ._checks import (CULPRIT_ASPECT, CULPRIT_VIEWS, MODEL_CONTRADICTED, MODEL_OK, MODEL_WIDENED, NO_CULPRIT,
-                      ModelChecks, consistency, duplicate_views, fixed_aspect_check, n_free_intrinsics, view_scores)
+from ._checks import (CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, CULPRIT_VIEWS, MODEL_CONTRADICTED, MODEL_OK,
+                      MODEL_WIDENED, NO_CULPRIT, ModelChecks, consistency, duplicate_views, fixed_aspect_check,
+                      fixed_release, lens_release, n_free_intrinsics, view_scores)
 from ._options import Options
 from ._prepare import joint_transform, prepare_views
 from ._result import RESULTS, CoreResult
@@ -121,12 +122,17 @@ def _common(points, homs: ViewHomologies, valid, options: Options) -> _Common:
 
 def _bundle(c: _Common, homs: ViewHomologies, aspect, options: Options, fixed=None):
     """The bundle for one aspect model (``fixed``: intrinsics held fixed, px, or None)
-    and the score statistics of its views (:func:`sorjax.core._checks.view_scores`):
-    ``(BundleOut, (S, delta_px2, n))``."""
+    and the score statistics of its views (:func:`sorjax.core._checks.view_scores`),
+    of the lens distortion it holds at 0 and of the intrinsics it holds fixed
+    (:func:`sorjax.core._checks.lens_release`, :func:`~sorjax.core._checks.fixed_release`;
+    None without fixed intrinsics): ``(BundleOut, (S, delta_px2, n, lens, fixed))``."""
     seeds, seed_ok = bundle_seeds(homs.v_x, homs.l_s, c.used, c.T, aspect, fixed)
     out = bundle_estimate(c.points_n, c.used, c.inliers, c.l_n, seeds, seed_ok, aspect, c.T, options, fixed)
     y = jax.lax.stop_gradient(out.y)
-    return out, view_scores(y, c.points_n, c.used, c.inliers, aspect, c.T, options, fixed)
+    args = (y, c.points_n, c.used, c.inliers, aspect, c.T, options)
+    lens = lens_release(*args, fixed)
+    held = None if fixed is None else fixed_release(*args, fixed)
+    return out, view_scores(*args, fixed) + (lens, held)
 
 
 def _distorted(c: _Common, homs: ViewHomologies, aspect, options: Options, distortion: str, fixed=None):
@@ -282,24 +288,44 @@ def calibrate_methods(points: Float[Array, "V M 2"], homs: ViewHomologies, metho
 def _model_checks(out, scores, free_fit, aspect, c: _Common, options: Options, fixed=None):
     """The model checks of a bundle estimate (:mod:`sorjax.core._checks`): ``(checks,
     cov)`` with ``cov`` the bundle's covariance widened as the checks say."""
-    S, delta, n = scores
+    S, delta, n, lens, held = scores
     free_out = free_fit[0]
     a_free, a_std, a_z, a_px, a_rej, a_beyond = fixed_aspect_check(
         aspect, out.K, out.cost, free_out.K, free_out.cov, free_out.cost, free_out.ok, out.n, options,
         free_s2=free_out.s2)
     dof, p, g, v_rej, v_beyond, birge = consistency(S, delta, n, c.used, aspect, options, fixed)
+    lens_ok = out.ok & jnp.isfinite(lens.score)
+    l_rej, l_beyond = lens.rejected & lens_ok, lens.beyond & lens_ok
+    f_rej = f_beyond = jnp.asarray(False)
+    if held is not None:
+        f_rej, f_beyond = held.rejected & out.ok, held.beyond & out.ok
     d = jnp.where(a_rej & ~a_beyond, _intrinsics(out.K) - _intrinsics(free_out.K), 0.0)
+    d_lens = jnp.where(l_rej & ~l_beyond, lens.shift, 0.0)
+    d_held = jnp.zeros(4) if held is None else jnp.where(f_rej & ~f_beyond, held.shift, 0.0)
+    # a lens's distortion or a wrong fixed intrinsic also makes the views disagree: it,
+    # not the views, is then to blame (its own test is the specific one)
+    v_rej, v_beyond = v_rej & ~(l_rej | f_rej), v_beyond & ~(l_rej | f_rej)
     inflation = jnp.where(v_rej & ~v_beyond, jnp.maximum(birge, 1.0), 1.0)
-    cov = out.cov * inflation + jnp.outer(d, d)
-    contradicted = a_beyond | v_beyond
-    verdict = jnp.where(contradicted, MODEL_CONTRADICTED, jnp.where(a_rej | v_rej, MODEL_WIDENED, MODEL_OK))
-    culprit = jnp.where(a_beyond | (a_rej & ~v_beyond), CULPRIT_ASPECT,
-                        jnp.where(v_rej, CULPRIT_VIEWS, NO_CULPRIT))
+    cov = out.cov * inflation + jnp.outer(d, d) + jnp.outer(d_lens, d_lens) + jnp.outer(d_held, d_held)
+    contradicted = a_beyond | v_beyond | l_beyond | f_beyond
+    widened = a_rej | v_rej | l_rej | f_rej
+    verdict = jnp.where(contradicted, MODEL_CONTRADICTED, jnp.where(widened, MODEL_WIDENED, MODEL_OK))
+    # the culprit: the first of aspect, lens, fixed intrinsics, views that contradicts
+    # the model, else the first that widened it
+    order = jnp.stack([a_beyond, l_beyond, f_beyond, v_beyond, a_rej, l_rej, f_rej, v_rej])
+    names = jnp.array([CULPRIT_ASPECT, CULPRIT_LENS, CULPRIT_FIXED, CULPRIT_VIEWS] * 2)
+    culprit = jnp.where(jnp.any(order), names[jnp.argmax(order)], NO_CULPRIT)
+    nan = jnp.asarray(jnp.nan)
     checks = ModelChecks(
         outline_error_px=jnp.asarray(options.outline_error_px, jnp.float64), aspect_fixed=jnp.asarray(aspect),
         aspect_free=a_free, aspect_free_std=a_std, aspect_z=a_z, aspect_px=a_px, view_score=S,
         view_px=jnp.where(c.used, jnp.sqrt(delta / jnp.maximum(n, 1.0)), jnp.nan), consistency_dof=dof,
-        consistency_p=p, consistency_px=g, inflation=inflation, verdict=verdict.astype(jnp.int32),
+        consistency_p=p, consistency_px=g,
+        lens_k1=jnp.where(lens_ok, lens.released[-1], nan), lens_p=jnp.where(lens_ok, lens.p, nan),
+        lens_px=jnp.where(lens_ok, lens.px, nan),
+        fixed_p=nan if held is None else held.p, fixed_px=nan if held is None else held.px,
+        fixed_shift=jnp.full(4, jnp.nan) if held is None else held.shift,
+        inflation=inflation, verdict=verdict.astype(jnp.int32),
         culprit=culprit.astype(jnp.int32), duplicate_of=c.duplicate_of)
     return checks, cov
 
@@ -313,7 +339,8 @@ def _no_checks(aspect, c: _Common, options: Options) -> ModelChecks:
         outline_error_px=jnp.asarray(options.outline_error_px, jnp.float64), aspect_fixed=jnp.asarray(aspect),
         aspect_free=nan, aspect_free_std=nan, aspect_z=nan, aspect_px=nan, view_score=jnp.full(V, jnp.nan),
         view_px=jnp.full(V, jnp.nan), consistency_dof=jnp.asarray(0, jnp.int32), consistency_p=nan,
-        consistency_px=nan, inflation=jnp.asarray(1.0), verdict=jnp.asarray(MODEL_OK, jnp.int32),
+        consistency_px=nan, lens_k1=nan, lens_p=nan, lens_px=nan, fixed_p=nan, fixed_px=nan,
+        fixed_shift=jnp.full(4, jnp.nan), inflation=jnp.asarray(1.0), verdict=jnp.asarray(MODEL_OK, jnp.int32),
         culprit=jnp.asarray(NO_CULPRIT, jnp.int32), duplicate_of=c.duplicate_of)
 
 
