@@ -630,13 +630,13 @@ def _gauss(m, sigma):
 
 def block_layer(block: Block, K, Rc, tc, shape, style, coverage, distort):
     """``(box, coverage, colour)`` of a clutter block in its image box (x0, y0, x1, y1
-    inclusive): the exact coverage of its visible faces (``coverage(polygon)``, a
-    full-size array) and flat Lambert shading; None when it is not in view."""
+    inclusive): the exact coverage of its visible faces (``coverage(polygon, (h, w))``,
+    e.g. render's ``polygon_coverage``, in the box's pixels) and flat Lambert shading;
+    None when it is not in view."""
     H, W = shape
     C = -Rc.T @ tc
     L = light_direction(style)
-    cov = np.zeros((H, W))
-    col = np.zeros((H, W, 3))
+    faces = []  # (image polygon, shade)
     for f in block.faces:
         p = block.vertices[list(f)]
         nrm = np.cross(p[1] - p[0], p[2] - p[0])
@@ -646,21 +646,23 @@ def block_layer(block: Block, K, Rc, tc, shape, style, coverage, distort):
         uv, z = _to_pixels(K, Rc, tc, p, distort)
         if z.min() <= 0.01:
             continue
-        if uv[:, 0].max() < -1 or uv[:, 1].max() < -1 or uv[:, 0].min() > W or uv[:, 1].min() > H:
-            continue
-        uv = np.clip(uv, -W, 2 * W)
-        cf = coverage(uv)
-        shade = style.exposure * (0.45 + 0.6 * max(0.0, float(nrm @ L)))
+        faces.append((np.clip(uv, -W, 2 * W), style.exposure * (0.45 + 0.6 * max(0.0, float(nrm @ L)))))
+    if not faces:
+        return None
+    allp = np.concatenate([uv for uv, _ in faces])
+    x0, y0 = max(0, int(math.floor(allp[:, 0].min())) - 1), max(0, int(math.floor(allp[:, 1].min())) - 1)
+    x1, y1 = min(W - 1, int(math.ceil(allp[:, 0].max())) + 1), min(H - 1, int(math.ceil(allp[:, 1].max())) + 1)
+    if x1 < x0 or y1 < y0:
+        return None
+    cov = np.zeros((y1 - y0 + 1, x1 - x0 + 1))
+    col = np.zeros(cov.shape + (3,))
+    for uv, shade in faces:
+        cf = coverage(uv - [x0, y0], cov.shape)
         cov += cf
         col += cf[..., None] * (np.asarray(block.colour) * shade)
     if cov.max() <= 0:
         return None
-    ys, xs = np.nonzero(cov > 0)
-    box = (int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max()))
-    x0, y0, x1, y1 = box
-    c = np.clip(cov[y0 : y1 + 1, x0 : x1 + 1], 0.0, 1.0)
-    colour = col[y0 : y1 + 1, x0 : x1 + 1] / np.maximum(cov[y0 : y1 + 1, x0 : x1 + 1], 1e-12)[..., None]
-    return box, c, colour
+    return (x0, y0, x1, y1), np.clip(cov, 0.0, 1.0), col / np.maximum(cov, 1e-12)[..., None]
 
 
 def material_params(rng, material: str) -> dict:

@@ -584,7 +584,7 @@ def _render_placed(K, Rc, tc, items, w, h, seed, noise, blur, supersample, table
                                        _behind(img, box) if mat == "glass" else None)
         else:
             lay = _photo.block_layer(blocks[i], K, Rc, tc, (h, w), style,
-                                     lambda poly: _coverage_in_box(poly, (h, w), min(8, supersample)),
+                                     lambda poly, shp: polygon_coverage(poly, shp, min(8, supersample)),
                                      _distorter(K, kd))
             if lay is None:
                 continue
