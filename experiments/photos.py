@@ -188,13 +188,13 @@ class Column:
 
 
 def run_set(seed: int, args, columns: dict[str, Column]) -> None:
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     ps = render.random_photo_set(seed, cameras=args.cameras, images=args.images)
     n_img = sum(len(c.renders) for c in ps.cameras)
     n_obj = sum(len(r.objects) for c in ps.cameras for r in c.renders)
     n_occ = sum(o.occluded for c in ps.cameras for r in c.renders for o in r.objects)
     print(f"set seed {seed}: {ps.description}; {n_img} images, {n_obj} objects ({n_occ} occluded); "
-          f"rendered in {time.perf_counter() - t0:.0f} s", flush=True)
+          f"rendered in {time.perf_counter() - t0:.0f} s ({time.process_time() - c0:.0f} s CPU)", flush=True)
     if args.save:
         os.makedirs(args.save, exist_ok=True)
         for ci, cam in enumerate(ps.cameras):
