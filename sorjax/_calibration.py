@@ -14,6 +14,7 @@ from __future__ import annotations
 import functools
 import math
 import warnings
+from typing import Sequence
 
 import equinox as eqx
 import jax
@@ -23,8 +24,9 @@ from jaxtyping import Array, Float, Int
 
 from ._checks import check_sizes
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
-from ._outline import DEFAULT_POINTS, as_outlines, implied_outline_error
-from .core._assess import ASYMMETRIC, COLLAPSED_FOCAL, CONIC, DUPLICATE, MASKED, PP_OUTSIDE, TRIMMED, USED, WIDE_FOV
+from ._outline import BINARY_MASK_PX, DEFAULT_POINTS, PIXEL_TRACE_NOTE, as_outlines, implied_outline_error
+from .core._assess import (ASYMMETRIC, COLLAPSED_FOCAL, CONIC, DUPLICATE, MASKED, PP_OUTSIDE, TRIMMED, USED, WIDE_FOV,
+                           outline_radius, view_verdicts)
 from .core._checks import CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, CULPRIT_VIEWS, MODEL_CONTRADICTED, MODEL_WIDENED, ModelChecks
 from .core._calibrate import calibrate_homologies, calibrate_methods
 from .core._options import Options
@@ -74,7 +76,9 @@ class Calibration(eqx.Module):
         perspective_z: the same evidence in units of the symmetry noise,
             ``sqrt(delta cost / s^2)`` (a z-score against "no perspective").
         outline_error: the outline error allowed for (px): the declared one, or more
-            when the coordinates show it (whole-pixel or mask-staircase outlines).
+            when the coordinates show it (whole-pixel or mask-staircase outlines), or
+            the one measured from the outlines (``calibrate(outline_error="measured")``;
+            a note says which).
         distortion_model: "none", "k1" or "k1k2" (``calibrate(distortion=...)``).
         distortion: OpenCV's radial coefficients ``(k1,)`` or ``(k1, k2)`` (camera-
             normalised coordinates, as ``cv2.undistort`` takes them); NaN when the
@@ -773,6 +777,64 @@ def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, opt
                        [getattr(r.checks, k)[:V] for k in per_check])
 
 
+def _check_outline_error(outline_error):
+    """``(declared px, per-outline errors (px) or None, measured?)`` from
+    :func:`calibrate`'s ``outline_error``: a number, "measured" or one number per outline."""
+    bad = ("outline_error must be a finite number of pixels >= 0, 'measured' (taken from the outlines' symmetry "
+           f"residuals), or one such number per outline; got {outline_error!r:.80}.")
+
+    def px(x):
+        if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating)) or not (
+                math.isfinite(x) and x >= 0):
+            raise ValueError(bad)
+        return float(x)
+
+    if isinstance(outline_error, str):
+        if outline_error != "measured":
+            raise ValueError(bad)
+        return OUTLINE_ERROR_PX, None, True
+    if isinstance(outline_error, (list, tuple, np.ndarray)):
+        try:
+            vals = np.asarray(outline_error).tolist() if np.ndim(outline_error) == 1 else None
+        except ValueError:  # ragged
+            vals = None
+        if not vals:
+            raise ValueError(bad)
+        return OUTLINE_ERROR_PX, np.array([px(x) for x in vals]), True
+    return px(outline_error), None, False
+
+
+def measured_outline_error(homs: ViewHomologies, points, per_outline=None, *, floor: float = OUTLINE_ERROR_PX,
+                           options: Options = Options()) -> tuple[float, str]:
+    """The outline error (px) measured from the outlines, and a note saying so.
+
+    Each view's error is its symmetry residual, the RMS residual of its homology fit
+    (eq. 20, px; ``homs.rms``), or the outline's own error estimate ``per_outline[i]``
+    (px, e.g. an extractor's) when larger; the measured error is their RMS over the
+    views the calibration keeps (:func:`sorjax.core._assess.view_verdicts`: not a
+    conic, not asymmetric, not over-trimmed), and at least ``floor``.  A residual
+    shows only the outline errors that break the symmetry; a segmentation that leaks
+    or shrinks has errors that keep it as well, of about the same size, which the
+    perspective gate must allow for: outlines 1 to 2 px from symmetric with the
+    default 0.1 px gave a confident wrong K (issue 17: fu 809 +- 29 px for a true 980)."""
+    pts = jnp.asarray(points)
+    keep = np.asarray(view_verdicts(jnp.asarray(homs.rms), jnp.asarray(homs.rms_untrimmed), outline_radius(pts),
+                                    jnp.asarray(homs.is_conic), jnp.asarray(homs.trimmed),
+                                    jnp.ones(pts.shape[0], bool), options)) == USED
+    rms = np.asarray(homs.rms, np.float64)
+    err = rms if per_outline is None else np.maximum(rms, np.asarray(per_outline, np.float64))
+    ok = keep & np.isfinite(err)
+    value = float(np.sqrt(np.mean(err[ok] ** 2))) if ok.any() else 0.0
+    src = "symmetry residuals" if per_outline is None else "symmetry residuals and own error estimates"
+    spread = f"{err[ok].min():.2g} to {err[ok].max():.2g} px" if ok.sum() > 1 else (
+        f"{err[ok][0]:.2g} px" if ok.any() else "no view kept")
+    used = max(value, floor)
+    return used, (f"outline error {used:.2g} px, measured from the outlines: the RMS of the {int(ok.sum())} kept views' "
+                  f"{src} ({spread}: {value:.2g} px)" + (f", at least {floor:g} px" if floor > value else "")
+                  + f"; the focal length counts as determined only when the outlines show >= "
+                  f"{options.perspective_factor * used:.2g} px of perspective.")
+
+
 def calibrate(
     outlines,
     method: str = "bundle",
@@ -781,7 +843,7 @@ def calibrate(
     n_samples: int = DEFAULT_SAMPLES,
     n_points: int = DEFAULT_POINTS,
     homologies=None,
-    outline_error: float = OUTLINE_ERROR_PX,
+    outline_error: float | str | Sequence[float] = OUTLINE_ERROR_PX,
     image_size: tuple[int, int] | None = None,
     distortion: str = "none",
     principal_point=None,
@@ -809,7 +871,16 @@ def calibrate(
             ``PERSPECTIVE_FACTOR`` (3) times this much perspective (see
             ``Calibration.perspective_px``).  The default, 0.1 px, is about the
             accuracy of good sub-pixel outlines of real objects; pass 0 for exact
-            outlines with only random noise (synthetic studies).
+            outlines with only random noise (synthetic studies).  ``"measured"``: taken
+            from the outlines themselves (:func:`measured_outline_error`: the RMS over
+            the views kept of each view's symmetry residual, at least the default) --
+            for outlines whose quality is not known, such as outlines found in
+            photographs; a sequence of one number per outline (px): as "measured", with
+            each view's residual raised to that outline's own error estimate (what an
+            extractor reports).  Outlines on a pixel grid raise it further (whole-pixel
+            coordinates, staircases; a pixel trace as ``cv2.findContours`` gives is
+            replaced by its binary mask's outline, :func:`sorjax.make_outline`, and
+            counts as accurate as that).
         image_size: ``(width, height)`` of the images in px, when known: an estimate
             with the principal point outside the image, or a field of view above
             ``MAX_FOV_DEG`` (120 deg), is then reported as not determined (the outlines'
@@ -875,10 +946,7 @@ def calibrate(
         raise ValueError(f"distortion={distortion!r} is estimated by the bundle only; use method='bundle' (the "
                          f"default) instead of {method!r}.")
     _check_sizes(n_samples, n_points)
-    if isinstance(outline_error, bool) or not isinstance(outline_error, (int, float, np.integer, np.floating)) or not (
-        math.isfinite(outline_error) and outline_error >= 0
-    ):
-        raise ValueError(f"outline_error must be a finite number of pixels >= 0; got {outline_error!r}.")
+    outline_error, per_outline, measure = _check_outline_error(outline_error)
     if image_size is not None:
         try:
             iw, ih = (int(x) for x in image_size)
@@ -891,6 +959,9 @@ def calibrate(
         image_size = (iw, ih)
     pp_fixed, f_fixed = _check_fixed(principal_point, focal_length, image_size, method)
     outs = as_outlines(outlines, n_points)
+    if per_outline is not None and len(per_outline) != len(outs):
+        raise ValueError(f"outline_error: got {len(per_outline)} per-outline errors for {len(outs)} outlines; give one "
+                         "number (px) per outline, in the same order, or one number for all, or 'measured'.")
     if len(outs) == 1 and pp_fixed is not None:
         aspect_ratio = 1.0 if aspect_ratio is None else aspect_ratio  # the single-view case: square pixels
     if f_fixed is not None and aspect_ratio is None:
@@ -909,28 +980,35 @@ def calibrate(
     if homologies is None:
         homologies = tuple(fit_homology(o, n_samples=n_samples, n_points=n_points) for o in outs)
     homologies = tuple(homologies)
+    points = np.stack([np.asarray(o.points, np.float64) for o in outs])
+    homs = view_homologies(homologies, n_samples)
     # outlines on a pixel grid carry at least their quantisation (or a mask's staircase)
     raw = list(outlines) if isinstance(outlines, (list, tuple, np.ndarray)) else []
     implied = [implied_outline_error(o) for o in raw] or [(0.0, "")]
     floor_px, floor_kind = max(implied, key=lambda t: t[0])
-    floor_note = []
+    traces = [i for i, t in enumerate(implied) if t[1] == "pixel trace"]
+    floor_note = [f"outline{'s' if len(traces) > 1 else ''} {', '.join(map(str, traces))}: {PIXEL_TRACE_NOTE}"
+                  ] if traces else []
     if floor_px > float(outline_error):
         which = [i for i, t in enumerate(implied) if t[0] == floor_px]
-        why = ("traced along a binary mask's pixels (a staircase about half a pixel inside the true edge, as "
-               "cv2.findContours gives)" if floor_kind == "staircase" else
-               "rounded to whole or half pixels (1/sqrt(12) px of rounding error per coordinate)")
+        why = {"staircase": "an unsmoothed staircase along or between pixels (up to half a pixel off the edge)",
+               "pixel trace": "a binary mask's boundary pixels (its outline is as accurate as a binary mask's, "
+                              f"about {BINARY_MASK_PX:g} px)",
+               }.get(floor_kind, "rounded to whole or half pixels (1/sqrt(12) px of rounding error per coordinate)")
         floor_note.append(
             f"outline{'s' if len(which) > 1 else ''} {', '.join(map(str, which))}: the coordinates are {why}; "
-            f"the outline error is taken as {floor_px:.2g} px instead of the declared {float(outline_error):g} px. "
-            "Sub-pixel outlines (sorjax.outlines_from_mask, or the 0.5 level of a blurred mask) are far more "
-            "accurate.")
+            f"the outline error is taken as {floor_px:.2g} px instead of the {'default' if measure else 'declared'} "
+            f"{float(outline_error):g} px. Sub-pixel outlines (sorjax.outlines_from_mask on a soft mask, or the 0.5 "
+            "level of a blurred mask) are more accurate.")
         outline_error = floor_px
+    if measure:
+        outline_error, note = measured_outline_error(homs, points, per_outline, floor=float(outline_error),
+                                                     options=Options(n_samples=n_samples))
+        floor_note.append(note)
     options = Options(n_samples=n_samples, outline_error_px=float(outline_error))
     a = None if method in ("IIa",) or (method == "bundle" and aspect_ratio is None) else (
         1.0 if aspect_ratio is None else float(aspect_ratio)
     )
-    points = np.stack([np.asarray(o.points, np.float64) for o in outs])
-    homs = view_homologies(homologies, n_samples)
     fixed = None
     if pp_fixed is not None or f_fixed is not None:
         fixed = (math.nan, math.nan if f_fixed is None else f_fixed) + (pp_fixed or (math.nan, math.nan))
