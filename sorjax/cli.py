@@ -230,9 +230,13 @@ def _plan_outputs(args, images: list[str]):
 
 
 def _views_from_images(args, labels: list[str]):
-    """(outlines, sources, images, size) from the image files (and masks/boxes);
-    ``images``: ``(file, index of its first view, number of views)``.  No image is
-    kept in memory (the overlays read them again)."""
+    """(outlines, sources, images, size, dropped) from the image files (and
+    masks/boxes); ``images``: ``(file, index of its first view, number of views)``;
+    ``dropped``: the labels of the images that gave no outline.  An image (or mask)
+    that gives no outline is dropped with a one-line warning naming it and the run
+    goes on (a box that gives none is left out by the extractor, with a warning naming
+    it); an image that cannot be read, or whose size differs, is an error.  No image
+    is kept in memory (the overlays read them again)."""
     import cv2
 
     import sorjax
@@ -242,7 +246,7 @@ def _views_from_images(args, labels: list[str]):
     if args.masks and len(args.masks) != len(args.outlines):
         raise ValueError(f"--masks needs one mask per image: {len(args.outlines)} images, {len(args.masks)} masks")
     boxes = _read_boxes(args.boxes, args.outlines)
-    outlines, sources, images, size = [], [], [], None
+    outlines, sources, images, size, dropped = [], [], [], None, []
     for k, f in enumerate(args.outlines):
         # with a mask the photograph is read for its size only: grey (a third of colour; OpenCV's reader
         # holds about twice its output while decoding)
@@ -254,27 +258,36 @@ def _views_from_images(args, labels: list[str]):
             raise ValueError(f"{f}: {w}x{h} px, but the first image is {size[0]}x{size[1]}: one camera, one image size")
         with warnings.catch_warnings(record=True) as caught, command_line_hints():
             warnings.simplefilter("always")
+            if args.masks:
+                del img  # a mask needs no photograph: one large array at a time
+                try:
+                    mask = _read_image(args.masks[k], cv2.IMREAD_UNCHANGED)
+                except ValueError as e:
+                    raise ValueError(f"{f}: {e}") from None
+                if mask.shape[:2] != (h, w):
+                    raise ValueError(f"{f}: {args.masks[k]}: mask is {mask.shape[1]}x{mask.shape[0]} px but its "
+                                     f"image {f} is {w}x{h} px")
+            failure = None
             try:
                 if args.masks:
-                    del img  # a mask needs no photograph: one large array at a time
-                    mask = _read_image(args.masks[k], cv2.IMREAD_UNCHANGED)
-                    if mask.shape[:2] != (h, w):
-                        raise ValueError(f"{args.masks[k]}: mask is {mask.shape[1]}x{mask.shape[0]} px but its image "
-                                         f"{f} is {w}x{h} px")
                     found = _mask_outlines(mask, args.masks[k])
                     del mask
                 else:
                     found = sorjax.outlines_from_image(img, boxes=boxes[k])
                     del img
-            except ValueError as e:
-                raise ValueError(f"{f}: {e}") from None
+            except ValueError as e:  # no outline from this image: the others may still serve
+                found, failure = [], e
         for wmsg in caught:
             print(f"warning: {labels[k]}: {wmsg.message}", file=sys.stderr)
+        if not found:
+            print(f"warning: {labels[k]}: no outline; image dropped, the run goes on without it"
+                  + (f": {failure}" if failure else ""), file=sys.stderr)
+            dropped.append(labels[k])
         images.append((f, len(outlines), len(found)))
         for j, o in enumerate(found):
             outlines.append(o)
             sources.append(f"{labels[k]}#{j}")
-    return outlines, sources, images, size
+    return outlines, sources, images, size, dropped
 
 
 OVERLAY_MAX_SIDE = 8192  # px: a larger photograph's overlay is drawn on it read grey at 1/2, 1/4 or 1/8 of its size
@@ -336,6 +349,11 @@ def _int_arg(lo: int, what: str):
 _nonnegative = _number_arg(0.0, False, "")
 
 
+def _outline_error_arg(text: str):
+    """``--outline-error``: a number of px >= 0, or "measured"."""
+    return "measured" if text == "measured" else _nonnegative(text)
+
+
 def _finite_arg(what: str):
     """An argparse type: any finite number."""
 
@@ -364,12 +382,23 @@ def _calibrate(args) -> int:
     labels = _labels(args.outlines)
     plan = _plan_outputs(args, args.outlines if any(is_image) else [])  # before any work
     if any(is_image):
-        outlines, sources, images, size = _views_from_images(args, labels)
+        outlines, sources, images, size, dropped_images = _views_from_images(args, labels)
     else:
         outlines = [_read_outline(f) for f in args.outlines]
         sources = list(labels)
-        images, size = [], None
-    print(f"{len(outlines)} outline(s) from {len(args.outlines)} file(s)")
+        images, size, dropped_images = [], None, []
+    print(f"{len(outlines)} outline(s) from {len(args.outlines)} file(s)"
+          + (f" ({len(dropped_images)} image(s) gave none and were dropped)" if dropped_images else ""))
+    need = 1 if (args.principal_point is not None or args.centre_principal_point) else 2
+    if dropped_images and len(outlines) < need:
+        raise ValueError(f"too few views left: {len(outlines)} outline(s) from {len(images) - len(dropped_images)} "
+                         f"image(s) after {len(dropped_images)} of {len(images)} gave none "
+                         f"({', '.join(dropped_images[:5])}{' ...' if len(dropped_images) > 5 else ''}: see the "
+                         f"warnings); calibration needs at least {'one' if need == 1 else 'two'}. Add images, or "
+                         "give boxes (--boxes) or masks (--masks) for the objects")
+    outline_error = args.outline_error
+    if outline_error is None:  # photographs: their outlines' quality is measured; masks and files: the default
+        outline_error = "measured" if any(is_image) and not args.masks else 0.1
     principal_point = args.principal_point
     if args.centre_principal_point:
         if size is None:
@@ -379,7 +408,7 @@ def _calibrate(args) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         cal = sorjax.calibrate(outlines, method=args.method, aspect_ratio=args.aspect_ratio,
-                               outline_error=args.outline_error, image_size=size, distortion=args.distortion,
+                               outline_error=outline_error, image_size=size, distortion=args.distortion,
                                principal_point=principal_point, focal_length=args.focal)
     for w in caught:
         print(f"warning: {w.message}", file=sys.stderr)
@@ -427,8 +456,8 @@ def _calibrate(args) -> int:
     print(np.array2string(np.asarray(cal.K), precision=3, suppress_small=True))
     if np.isfinite(cal.perspective_px):
         print(f"perspective shown by the outlines: {cal.perspective_px:.3g} px RMS (z = {cal.perspective_z:.3g}; "
-              f"the focal length needs >= {3 * getattr(cal, 'outline_error', args.outline_error):.3g} px, 3 x the "
-              "outline error)")
+              f"the focal length needs >= {3 * cal.outline_error:.3g} px, 3 x the outline error of "
+              f"{cal.outline_error:.3g} px)")
     if plan is not None:
         if size is None:
             pts = np.concatenate([np.asarray(o).reshape(-1, 2) for o in outlines])
@@ -512,10 +541,12 @@ def main(argv=None) -> int:
                    help="hold the focal length fv fixed at F px (fu = aspect ratio x F, the aspect ratio 1 unless "
                         "--aspect-ratio; OpenCV's CALIB_FIX_FOCAL_LENGTH): only the principal point (and the "
                         "distortion) is estimated")
-    c.add_argument("--outline-error", type=_nonnegative, default=0.1, metavar="PX",
+    c.add_argument("--outline-error", type=_outline_error_arg, default=None, metavar="PX|measured",
                    help="systematic error of the outlines in px that their symmetry does not show "
                         "(segmentation, lens distortion); the outlines must show 3x this much perspective "
-                        "for the focal length to count as determined (default 0.1; 0 for exact outlines)")
+                        "for the focal length to count as determined. 'measured': the RMS of the views' "
+                        "symmetry residuals, at least 0.1 px (the default for photographs without --masks; "
+                        "otherwise the default is 0.1; 0 for exact outlines)")
     c.set_defaults(func=_calibrate)
     e = sub.add_parser("experiment", help="run an experiment config (configs/*.toml)")
     e.add_argument("config", help="a TOML config file, or the name of one in configs/ (e.g. table1-quick)")

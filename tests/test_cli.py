@@ -115,7 +115,7 @@ def test_cli_image_bad_input(tmp_path, capsys):
     cv2.imwrite(str(small), np.zeros((240, 320), np.uint8))
     cases = [
         (["calibrate", str(tmp_path / "missing.png")], "no such file"),
-        (["calibrate", str(blank), imgs[0]], "blank.png"),
+        (["calibrate", str(blank), str(blank)], "too few views left: 0 outline(s) from 0 image(s) after 2 of 2"),
         (["calibrate", imgs[0], "--masks", str(small)], "mask is 320x240 px"),
         (["calibrate", imgs[0], "--masks", masks[0], masks[0]], "one mask per image"),
     ]
@@ -123,3 +123,38 @@ def test_cli_image_bad_input(tmp_path, capsys):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err
         assert msg in err and "Traceback" not in err, (argv, err)
+
+
+def test_cli_drops_images_and_boxes_that_give_no_outline(tmp_path, capsys):
+    """One box that cuts its object, and an image with nothing in it, are dropped with a
+    warning naming them; the run goes on with the rest (it used to end with exit 2).
+    Too few views left: refused, saying so."""
+    import json
+
+    import cv2
+
+    from sorjax import render
+
+    K, imgs, _ = _rendered(tmp_path)
+    blank = tmp_path / "blank.png"
+    cv2.imwrite(str(blank), np.full((480, 640, 3), 128, np.uint8))
+    boxes = {}
+    for s, f in enumerate(imgs):
+        r = render.random_table_scene(s, K, n_objects=2)
+        boxes[f] = [[max(0, b[0] - 8), max(0, b[1] - 8), min(639, b[2] + 8), min(479, b[3] + 8)] for b in r.boxes]
+    x0, y0, x1, y1 = boxes[imgs[0]][0]
+    boxes[imgs[0]][0] = [x0 + (x1 - x0) // 3, y0 + (y1 - y0) // 3, x1 - (x1 - x0) // 3, y1 - (y1 - y0) // 3]
+    boxes[str(blank)] = [[200, 150, 400, 350]]
+    (tmp_path / "boxes.json").write_text(json.dumps(boxes))
+    code = main(["calibrate", imgs[0], str(blank), imgs[1], "--boxes", str(tmp_path / "boxes.json")])
+    cap = capsys.readouterr()
+    assert code in (0, 1), cap.err  # a calibration was attempted (exit 2: the run was ended)
+    assert "warning: img0.png: box 0 (" in cap.err
+    assert "blank.png: no outline; image dropped, the run goes on without it" in cap.err
+    assert "3 outline(s) from 3 file(s) (1 image(s) gave none and were dropped)" in cap.out
+    assert "measured from the outlines" in cap.err  # photographs: the outline error is measured
+    # one view left from the good box: too few, refused with a reason
+    (tmp_path / "one.json").write_text(json.dumps({imgs[0]: boxes[imgs[0]][:1], str(blank): boxes[str(blank)]}))
+    assert main(["calibrate", imgs[0], str(blank), "--boxes", str(tmp_path / "one.json")]) == 2
+    err = capsys.readouterr().err
+    assert "too few views left: 0 outline(s) from 0 image(s) after 2 of 2 gave none (img0.png, blank.png" in err
