@@ -146,3 +146,57 @@ def test_readme_first_example_runs():
         exec(compile(block, "README.md", "exec"), ns)
     cal = ns["cal"]
     assert cal.success and abs(cal.fv - 700.0) < 3 * cal.std[1]
+
+
+def _systematic(o, amp_px, rng):
+    """``o`` moved along its normals by a smooth, asymmetric error of ``amp_px`` px RMS
+    (three low harmonics of the angle about the centroid: segmentation that leaks and
+    shrinks, unlike noise)."""
+    c = o.mean(0)
+    th = np.arctan2(o[:, 1] - c[1], o[:, 0] - c[0])
+    t = np.roll(o, -1, 0) - np.roll(o, 1, 0)
+    n = np.column_stack([t[:, 1], -t[:, 0]]) / np.linalg.norm(t, axis=1)[:, None]
+    k, ph, a = rng.integers(1, 4, size=3), rng.uniform(0, 2 * np.pi, 3), rng.normal(0, 1, 3)
+    d = sum(a[i] * np.cos(k[i] * th + ph[i]) for i in range(3))
+    return o + (amp_px / np.sqrt(np.mean(d**2)) * d)[:, None] * n
+
+
+def test_measured_outline_error_refuses_a_confident_wrong_focal_length():
+    """Outlines with ~1 px of systematic error (per-view symmetry residuals 0.04 to 1.1 px): with the
+    default outline_error (0.1 px) the bundle reports fu 795 +- 42 px for a true 1000
+    (4.9 std off); with the error measured from the residuals it is refused (or within
+    its std).  Seeded (seed 4 of random_sor_scene)."""
+    import warnings
+
+    sc = scenes.random_sor_scene(4, 4, K=scenes.intrinsics(1000.0, principal_point=(330.0, 250.0)))
+    rng = np.random.default_rng(4)
+    outs = [_systematic(o, 1.0, rng) for o in sc.outlines]
+    homs = tuple(sorjax.fit_homology(o) for o in outs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        default = sorjax.calibrate(outs, homologies=homs)
+    assert default.success and abs(default.fu - 1000.0) > 3 * default.std[0]  # the failure mode
+    with pytest.warns(UserWarning, match=r"outline error 0.6 px, measured from the outlines: the RMS of the 4 kept "
+                                         r"views' symmetry residuals \(0.041 to 1.1 px"):
+        cal = sorjax.calibrate(outs, homologies=homs, outline_error="measured")
+    rms = np.array([float(h.rms) for h in homs])
+    assert cal.outline_error == pytest.approx(np.sqrt(np.mean(rms**2)))
+    assert any("measured from the outlines" in n for n in cal.notes)
+    e = np.abs(np.array([cal.fu, cal.fv, cal.u0, cal.v0]) - np.array([1000.0, 1000.0, 330.0, 250.0]))
+    assert not cal.success or np.all(e <= 3 * cal.std)
+    assert not cal.success and "too little perspective" in cal.details
+    # an extractor's own per-outline estimates raise a view's error where larger
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        per = sorjax.calibrate(outs, homologies=homs, outline_error=[0.0, 2.0, 0.0, 0.0])
+    e2 = rms.copy()
+    e2[1] = 2.0
+    assert per.outline_error == pytest.approx(np.sqrt(np.mean(e2**2)))
+    # exact outlines: the measured error is the default floor, and they calibrate
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        exact = sorjax.calibrate(sc.outlines, outline_error="measured")
+    assert exact.outline_error == pytest.approx(0.1) and exact.success
+    for bad in ("measure", [0.1, -1.0, 0.1, 0.1], [0.1, 0.1], [[0.1]], True, float("nan")):
+        with pytest.raises(ValueError, match="outline_error"):
+            sorjax.calibrate(outs, homologies=homs, outline_error=bad)

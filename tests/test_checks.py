@@ -12,7 +12,7 @@ import pytest
 
 import sorjax
 from sorjax import scenes
-from sorjax._outline import QUANTISED_PX, STAIRCASE_PX, implied_outline_error
+from sorjax._outline import BINARY_MASK_PX, QUANTISED_PX, STAIRCASE_PX, implied_outline_error
 from sorjax.core._checks import MODEL_CONTRADICTED, MODEL_OK, MODEL_WIDENED
 
 
@@ -126,7 +126,8 @@ def test_implied_outline_error():
     mask = np.zeros((200, 200), np.uint8)
     cv2.circle(mask, (100, 100), 40, 255, -1)
     c = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)[0][0][:, 0, :]
-    assert implied_outline_error(c) == (STAIRCASE_PX, "staircase")
+    assert implied_outline_error(c) == (BINARY_MASK_PX, "pixel trace")  # replaced by its mask's outline
+    assert implied_outline_error(c + [0.5, 0.5]) == (STAIRCASE_PX, "staircase")  # a staircase on the half-pixel grid
     assert implied_outline_error(sorjax.make_outline(p)) == (0.0, "")
 
 
