@@ -61,13 +61,9 @@ def test_resample_closed_passes_through_vertices_of_a_square():
 
 def _signed_distance(pts, exact):
     """Distance (px) of each point to the closed polyline ``exact``, negative inside."""
-    import cv2
+    from sorjax.scenes import _points_in_polygon, distance_to_polyline
 
-    from sorjax.scenes import distance_to_polyline
-
-    poly = exact.astype(np.float32).reshape(-1, 1, 2)
-    inside = np.array([cv2.pointPolygonTest(poly, (float(x), float(y)), False) > 0 for x, y in pts])
-    return np.where(inside, -1.0, 1.0) * distance_to_polyline(pts, exact)
+    return np.where(_points_in_polygon(exact, pts), -1.0, 1.0) * distance_to_polyline(pts, exact)
 
 
 def test_findcontours_trace_is_read_as_its_binary_mask():
