@@ -6,7 +6,9 @@
 outline per file: ``.npy``, or text with two columns ``x y`` in pixels), calibrates,
 prints K with its standard deviations and a per-view table, and with ``--out`` writes
 an OpenCV YAML, a JSON twin and overlay images.  Errors in the input are reported in one line with
-exit code 2, never a traceback.
+exit code 2, never a traceback; an image that gives no outline is dropped with a one-line warning and
+the run goes on with the others.  Outlines found in photographs (no ``--masks``) are calibrated with
+the outline error measured from their symmetry residuals (``calibrate(outline_error="measured")``).
 
 Outputs are safe: every file to write is checked before any work (its folder exists
 or can be created and is writable, it is not one of the inputs), each is written to a
