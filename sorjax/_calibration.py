@@ -781,11 +781,11 @@ def _check_outline_error(outline_error):
     """``(declared px, per-outline errors (px) or None, measured?)`` from
     :func:`calibrate`'s ``outline_error``: a number, "measured" or one number per outline."""
     bad = ("outline_error must be a finite number of pixels >= 0, 'measured' (taken from the outlines' symmetry "
-           f"residuals), or one such number per outline; got {outline_error!r:.80}.")
+           f"residuals), or one such number per outline (NaN: no estimate); got {outline_error!r:.80}.")
 
-    def px(x):
+    def px(x, nan_ok=False):
         if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating)) or not (
-                math.isfinite(x) and x >= 0):
+                (math.isfinite(x) and x >= 0) or (nan_ok and math.isnan(x))):
             raise ValueError(bad)
         return float(x)
 
@@ -800,8 +800,19 @@ def _check_outline_error(outline_error):
             vals = None
         if not vals:
             raise ValueError(bad)
-        return OUTLINE_ERROR_PX, np.array([px(x) for x in vals]), True
+        return OUTLINE_ERROR_PX, np.array([px(x, nan_ok=True) for x in vals]), True
     return px(outline_error), None, False
+
+
+def _own_errors(outlines):
+    """The outlines' own error estimates (px; NaN: none): the ``outline_error``
+    attribute an extractor attaches to its outline arrays (sorjax's image path does),
+    or None when no outline has one."""
+    own = []
+    for o in outlines:
+        e = getattr(o, "outline_error", None)
+        own.append(float(e) if _is_number(e) and (math.isnan(e) or (math.isfinite(e) and e >= 0)) else math.nan)
+    return np.array(own) if np.isfinite(own).any() else None
 
 
 def measured_outline_error(homs: ViewHomologies, points, per_outline=None, *, floor: float = OUTLINE_ERROR_PX,
@@ -810,7 +821,7 @@ def measured_outline_error(homs: ViewHomologies, points, per_outline=None, *, fl
 
     Each view's error is its symmetry residual, the RMS residual of its homology fit
     (eq. 20, px; ``homs.rms``), or the outline's own error estimate ``per_outline[i]``
-    (px, e.g. an extractor's) when larger; the measured error is their RMS over the
+    (px, e.g. an extractor's; NaN: none) when larger; the measured error is their RMS over the
     views the calibration keeps (:func:`sorjax.core._assess.view_verdicts`: not a
     conic, not asymmetric, not over-trimmed), and at least ``floor``.  A residual
     shows only the outline errors that break the symmetry; a segmentation that leaks
@@ -822,7 +833,7 @@ def measured_outline_error(homs: ViewHomologies, points, per_outline=None, *, fl
                                     jnp.asarray(homs.is_conic), jnp.asarray(homs.trimmed),
                                     jnp.ones(pts.shape[0], bool), options)) == USED
     rms = np.asarray(homs.rms, np.float64)
-    err = rms if per_outline is None else np.maximum(rms, np.asarray(per_outline, np.float64))
+    err = rms if per_outline is None else np.fmax(rms, np.asarray(per_outline, np.float64))
     ok = keep & np.isfinite(err)
     value = float(np.sqrt(np.mean(err[ok] ** 2))) if ok.any() else 0.0
     src = "symmetry residuals" if per_outline is None else "symmetry residuals and own error estimates"
@@ -875,9 +886,10 @@ def calibrate(
             from the outlines themselves (:func:`measured_outline_error`: the RMS over
             the views kept of each view's symmetry residual, at least the default) --
             for outlines whose quality is not known, such as outlines found in
-            photographs; a sequence of one number per outline (px): as "measured", with
-            each view's residual raised to that outline's own error estimate (what an
-            extractor reports).  Outlines on a pixel grid raise it further (whole-pixel
+            photographs; a sequence of one number per outline (px; NaN: none): as
+            "measured", with each view's residual raised to that outline's own error
+            estimate (what an extractor reports; with "measured", outline arrays that
+            carry an ``outline_error`` attribute give it themselves).  Outlines on a pixel grid raise it further (whole-pixel
             coordinates, staircases; a pixel trace as ``cv2.findContours`` gives is
             replaced by its binary mask's outline, :func:`sorjax.make_outline`, and
             counts as accurate as that).
@@ -1001,6 +1013,8 @@ def calibrate(
             f"{float(outline_error):g} px. Sub-pixel outlines (sorjax.outlines_from_mask on a soft mask, or the 0.5 "
             "level of a blurred mask) are more accurate.")
         outline_error = floor_px
+    if measure and per_outline is None:
+        per_outline = _own_errors(raw)
     if measure:
         outline_error, note = measured_outline_error(homs, points, per_outline, floor=float(outline_error),
                                                      options=Options(n_samples=n_samples))

@@ -192,11 +192,21 @@ def test_measured_outline_error_refuses_a_confident_wrong_focal_length():
     e2 = rms.copy()
     e2[1] = 2.0
     assert per.outline_error == pytest.approx(np.sqrt(np.mean(e2**2)))
-    # exact outlines: the measured error is the default floor, and they calibrate
+    assert any("symmetry residuals and own error estimates" in n for n in per.notes)
+
+    class Carrying(np.ndarray):  # an extractor's outline array with its own error estimate
+        outline_error = float("nan")
+
+    carried = [o.view(Carrying) for o in outs]
+    carried[1].outline_error = 2.0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        exact = sorjax.calibrate(sc.outlines, outline_error="measured")
-    assert exact.outline_error == pytest.approx(0.1) and exact.success
+        own = sorjax.calibrate(carried, homologies=homs, outline_error="measured")
+    assert own.outline_error == pytest.approx(per.outline_error)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        nan = sorjax.calibrate(outs, homologies=homs, outline_error=[float("nan")] * 4)
+    assert nan.outline_error == pytest.approx(cal.outline_error)
     for bad in ("measure", [0.1, -1.0, 0.1, 0.1], [0.1, 0.1], [[0.1]], True, float("nan")):
         with pytest.raises(ValueError, match="outline_error"):
             sorjax.calibrate(outs, homologies=homs, outline_error=bad)
