@@ -320,9 +320,9 @@ QUANTISED_PX = 1.0 / np.sqrt(12.0)  # a coordinate rounded to whole (or half) pi
 STAIRCASE_PX = 0.5  # an unsmoothed staircase along or between pixels (its steps are up to half a pixel off)
 # A pixel trace, replaced by its binary mask's outline (:func:`outline_of_pixel_trace`):
 # the accuracy of outlines of binary masks.  Measured (experiments/pixel_traces.py, seed
-# 0: 72 outlines of renders of known geometry): RMS distance to the exact silhouette
-# 0.106 px, mean signed distance -0.007 px (per outline -0.085 to +0.015 px); the
-# cv2.findContours points themselves: 0.54 px RMS, -0.47 px.
+# 0: 45 outlines of renders of known geometry): RMS distance to the exact silhouette
+# 0.106 px, mean signed distance -0.003 px (per outline -0.07 to +0.07 px); the
+# cv2.findContours points themselves: 0.54 px RMS, -0.46 px.
 BINARY_MASK_PX = 0.1
 
 
