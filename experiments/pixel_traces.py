@@ -58,8 +58,9 @@ def traces(binary: np.ndarray, approx: int) -> list[np.ndarray]:
 
 def camera(rng, f: float, size=(640, 480)) -> np.ndarray:
     w, h = size
-    return S.intrinsics(f, aspect_ratio=float(rng.uniform(0.95, 1.05)),
-                        principal_point=(0.5 * w + rng.uniform(-0.08, 0.08) * w, 0.5 * h + rng.uniform(-0.08, 0.08) * h))
+    a = float(rng.uniform(0.95, 1.05))
+    pp = (0.5 * w + rng.uniform(-0.08, 0.08) * w, 0.5 * h + rng.uniform(-0.08, 0.08) * h)
+    return S.intrinsics(f, aspect_ratio=a, principal_point=pp)
 
 
 def renders(K, n: int, objects: int, seed: int):

@@ -821,8 +821,8 @@ def measured_outline_error(homs: ViewHomologies, points, per_outline=None, *, fl
 
     Each view's error is its symmetry residual, the RMS residual of its homology fit
     (eq. 20, px; ``homs.rms``), or the outline's own error estimate ``per_outline[i]``
-    (px, e.g. an extractor's; NaN: none) when larger; the measured error is their RMS over the
-    views the calibration keeps (:func:`sorjax.core._assess.view_verdicts`: not a
+    (px, e.g. an extractor's; NaN: none) when larger; the measured error is their RMS
+    over the views the calibration keeps (:func:`sorjax.core._assess.view_verdicts`: not a
     conic, not asymmetric, not over-trimmed), and at least ``floor``.  A residual
     shows only the outline errors that break the symmetry; a segmentation that leaks
     or shrinks has errors that keep it as well, of about the same size, which the
@@ -840,8 +840,8 @@ def measured_outline_error(homs: ViewHomologies, points, per_outline=None, *, fl
     spread = f"{err[ok].min():.2g} to {err[ok].max():.2g} px" if ok.sum() > 1 else (
         f"{err[ok][0]:.2g} px" if ok.any() else "no view kept")
     used = max(value, floor)
-    return used, (f"outline error {used:.2g} px, measured from the outlines: the RMS of the {int(ok.sum())} kept views' "
-                  f"{src} ({spread}: {value:.2g} px)" + (f", at least {floor:g} px" if floor > value else "")
+    return used, (f"outline error {used:.2g} px, measured from the outlines: the RMS of the {int(ok.sum())} kept "
+                  f"views' {src} ({spread}: {value:.2g} px)" + (f", at least {floor:g} px" if floor > value else "")
                   + f"; the focal length counts as determined only when the outlines show >= "
                   f"{options.perspective_factor * used:.2g} px of perspective.")
 
@@ -889,10 +889,10 @@ def calibrate(
             photographs; a sequence of one number per outline (px; NaN: none): as
             "measured", with each view's residual raised to that outline's own error
             estimate (what an extractor reports; with "measured", outline arrays that
-            carry an ``outline_error`` attribute give it themselves).  Outlines on a pixel grid raise it further (whole-pixel
-            coordinates, staircases; a pixel trace as ``cv2.findContours`` gives is
-            replaced by its binary mask's outline, :func:`sorjax.make_outline`, and
-            counts as accurate as that).
+            carry an ``outline_error`` attribute give it themselves).  Outlines on a
+            pixel grid raise it further (whole-pixel coordinates, staircases; a pixel
+            trace as ``cv2.findContours`` gives is replaced by its binary mask's
+            outline, :func:`sorjax.make_outline`, and counts as accurate as that).
         image_size: ``(width, height)`` of the images in px, when known: an estimate
             with the principal point outside the image, or a field of view above
             ``MAX_FOV_DEG`` (120 deg), is then reported as not determined (the outlines'
