@@ -1150,7 +1150,7 @@ def _auto_init(comp: np.ndarray, shape, window, r: int) -> np.ndarray:
 def _finish_all(src: _Image, segs, *, refine, min_area, smooth, border) -> list[np.ndarray]:
     """Outlines of the segmented objects ``(index, box, window, fg, symmetry_rms)`` of one
     image, with one unmixing band for all, each moved onto the image's edges when
-    ``refine`` (:func:`sorjax._detect.refine_to_edges`): :class:`ImageOutline`\ s."""
+    ``refine`` (:func:`sorjax._detect.refine_to_edges`), as :class:`ImageOutline` arrays."""
     from ._detect import DetectOptions, ImageOutline, outline_quality, refine_to_edges
 
     inner = None
