@@ -1194,15 +1194,20 @@ def outlines_from_image(
         (H, W) and BGRA are accepted.
     boxes : sequence of (x0, y0, x1, y1), optional
         One box per object, in pixels (top-left and bottom-right corners, inclusive),
-        enclosing the whole object with a margin of a few pixels.  Each object is
-        segmented by ``cv2.grabCut`` initialised with its box.  Without boxes the
-        objects are found automatically: GrabCut on the image (reduced to at most 640 px
-        wide) initialised with all of it but a border band (1.5 % of the smaller side,
-        at least 5 px) as probable foreground; its connected regions that look like
-        solid objects (area >= 0.2 % of the image, solidity >= 0.35, clear of the border
-        band) are then segmented again at full resolution, each from its own region.
-        A plain background that reaches the image border all round works best; objects
-        must not touch each other (touching objects give one merged outline).
+        around the object; it may be tight.  Each object is segmented by
+        ``cv2.grabCut`` initialised with its box grown by 15 % of its larger side (at
+        least 8 px; GrabCut needs background inside its rectangle), keeping the region
+        with the most pixels inside the box given; an object reaching the grown box's
+        side is refused as cut.  Without boxes the objects are found automatically
+        (:mod:`sorjax._detect`): proposals from colour clusters, saliency, smooth
+        (untextured) regions and GrabCut from the whole image minus a border band, on
+        the image reduced to at most 640 px; each proposal is segmented by GrabCut and
+        kept when a harmonic homology maps its outline onto itself (the symmetry of a
+        surface of revolution's outline: :func:`sorjax.fit_homology`, residual at most
+        about 1 px RMS); every other region is dropped with a warning saying why (not
+        symmetric, a leak or merged neighbour, cut by the border, ...).  Objects must
+        not touch each other (touching objects give one merged outline, which is
+        usually dropped as not symmetric).
     min_area : float
         Smallest object kept, pixels^2.
     smooth : float
@@ -1216,7 +1221,10 @@ def outlines_from_image(
         sensor noise, against 0.25 px for the GrabCut mask; the band of pixels unmixed
         widens from 1.5 to 2.5 px when the image's edges look blurred, which keeps about
         0.2 px at a blur of 0.8 px; more blur degrades it: about 0.5 px at 1.2 px).
-        Without it the binary GrabCut mask is used.
+        Then each outline point is checked against the colour edge along its normal
+        (:func:`sorjax._detect.refine_to_edges`: gradient maximum, ambiguous points
+        rejected) and moved where the two disagree, and the outline's error is
+        estimated.  Without it the binary GrabCut mask is used.
     iterations : int
         GrabCut iterations.
 
@@ -1226,7 +1234,22 @@ def outlines_from_image(
         One outline per object (conventions of :func:`outlines_from_mask`; pixel centres
         at integer coordinates), in box order with boxes, largest first without.
         Objects that cannot be segmented, that a box cuts or that touch the image border
-        are left out with a warning that says why.
+        are left out with a warning that says why.  Each outline is a
+        ``sorjax._detect.ImageOutline`` (an ``np.ndarray`` subclass; ``np.asarray``
+        gives the plain array) with what the image said about it:
+
+        * ``outline_error`` (float, px): estimated RMS distance of the outline from the
+          object's true edge, from the data: the larger of the edge estimate (scatter
+          of the confirmed edge points about the smooth outline over the points per
+          smoothing window, the RMS disagreement between the unmixed and the gradient
+          edge, half a pixel times the fraction of points whose edge was ambiguous) and
+          ``symmetry_rms / sqrt 2``; NaN with ``refine=False``.  Read it with
+          ``getattr(o, "outline_error", nan)``: it is what to declare as the
+          calibration's outline error for outlines from images;
+        * ``symmetry_rms`` (px): RMS residual of the harmonic homology fitted to the
+          outline (robust fit);
+        * ``edge_contrast`` (8-bit grey levels): median colour step across the edge;
+        * ``accepted``: fraction of the points whose edge was confirmed on the image.
 
     Raises
     ------
