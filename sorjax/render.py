@@ -49,17 +49,28 @@ from typing import Sequence, Union
 import cv2
 import numpy as np
 
+from . import _photo
 from . import scenes as _sc
 
 __all__ = [
+    "MATERIALS",
     "PALETTE",
+    "PhotoCamera",
+    "PhotoSet",
+    "PhotoStyle",
     "TableObject",
     "RenderedObject",
     "Rendering",
     "polygon_coverage",
     "render",
+    "random_photo_set",
+    "random_style",
     "random_table_scene",
 ]
+
+PhotoStyle = _photo.PhotoStyle
+MATERIALS = _photo.MATERIALS
+random_style = _photo.random_style
 
 #: Object colours (BGR, 0-255): white porcelain, cobalt, brick red, sage green,
 #: mustard, teal, plum, grey stoneware.
@@ -94,6 +105,10 @@ class TableObject:
         Radians; the direction of a lying object's axis (unused when upright).
     colour : (b, g, r) or None
         Base colour 0-255; None picks one from :data:`PALETTE` with the seed.
+    material : str or None
+        How it looks (:data:`MATERIALS`: "plain", "glossy", "painted", "glass", "metal";
+        see :mod:`sorjax._photo`); None: "plain" in the plain renders, drawn from the
+        style's ``materials`` in photo-like ones.  Never changes its coverage.
     """
 
     profile: Union[_sc.Profile, str]
@@ -101,6 +116,7 @@ class TableObject:
     lying: bool = False
     yaw: float = 0.0
     colour: tuple[float, float, float] | None = None
+    material: str | None = None
 
 
 @dataclass(frozen=True)
@@ -335,10 +351,14 @@ def _background(K, Rc, tc, shape, rng, table_colour, wall_colour, grid=None):
     return img
 
 
-def _object_colour_field(truth, base, box, light_angle, grid=None):
-    """Shaded colour (float BGR, 0-255) of an object on the pixels of ``box`` (inclusive);
-    with distortion (``grid``: the pinhole positions of the pixels) shaded in the
-    pinhole image, about its outline and axis."""
+def _object_frame(truth, box, grid=None):
+    """Shading frame of an object on the pixels of ``box`` (inclusive): ``u`` (signed
+    position across the body, -1 to 1 from one side of the outline to the other about
+    the image of the axis), ``nz = sqrt(1 - u^2)``, ``along`` (0 to 1 along the axis
+    image), ``L`` (the outline's length along the axis image, px), ``pd`` (signed
+    distance from the axis image, px) and ``l`` (the axis image, ``a^2 + b^2 = 1``); with
+    distortion (``grid``: the pinhole positions of the pixels) computed in the pinhole
+    image, about its outline and axis."""
     x0, y0, x1, y1 = box
     l = truth.l_s
     o = truth.outline if truth.outline_pinhole is None else truth.outline_pinhole
@@ -372,15 +392,19 @@ def _object_colour_field(truth, base, box, light_angle, grid=None):
     half = np.where(pd >= 0, np.interp(pb, centers, wr), np.interp(pb, centers, wl))
     u = np.clip(pd / half, -1.0, 1.0)
     nz = np.sqrt(np.clip(1.0 - u * u, 0.0, 1.0))
-    la = light_angle
-    diffuse = np.clip(u * math.sin(la) + nz * math.cos(la), 0.0, 1.0)
-    hv = 0.5 * la + 0.15
-    spec = np.clip(u * math.sin(hv) + nz * math.cos(hv), 0.0, 1.0) ** 60
     along = np.clip((ps - s0) / max(s1 - s0, 1.0), 0.0, 1.0)
-    # which end of the axis is "down" on the table does not matter for the look
-    shade = (0.3 + 0.7 * diffuse) * (0.92 + 0.08 * along)
-    col = np.asarray(base, dtype=np.float64)[None, None, :] * shade[..., None] + 200.0 * spec[..., None]
-    return col
+    return {"u": u, "nz": nz, "along": along, "L": max(s1 - s0, 1.0), "pd": pd, "l": l}
+
+
+def _object_colour_field(truth, base, box, light_angle, grid=None, material="plain", params=None,
+                         specular=1.0, bg_sample=None):
+    """Shaded colour (float BGR, 0-255) of an object on the pixels of ``box``
+    (inclusive).  ``"plain"``: Lambertian-looking across the body (:func:`_object_frame`),
+    a specular stripe, a slight gradient along the axis; the other materials
+    (:func:`sorjax._photo.shade_material`) need their ``params`` and, for glass,
+    ``bg_sample``."""
+    g = _object_frame(truth, box, grid)
+    return _photo.shade_material(material, params or {}, base, g, light_angle, specular, bg_sample)
 
 
 def _as_profile(p) -> _sc.Profile:
@@ -432,6 +456,7 @@ def render(
     wall_colour=(200, 205, 210),
     description: str | None = None,
     distortion: Sequence[float] | None = None,
+    style=None,
 ) -> Rendering:
     """Render solids of revolution on a table seen by ``K [R | t]``.
 
@@ -460,6 +485,12 @@ def render(
         Base colours, 0-255.
     distortion : (k1, k2) or None
         OpenCV radial lens distortion (module docstring); None: a pinhole camera.
+    style : None, "photo" or PhotoStyle
+        None (default): the plain renders (a wooden table, a plain wall at infinity, no
+        shadows).  "photo" or a :class:`PhotoStyle`: a photo-like scene
+        (:mod:`sorjax._photo`: textured table and wall, clutter, shadows, reflections,
+        materials, defocus, shot noise, JPEG); ``table_colour`` and ``wall_colour``
+        are then the style's.  The objects' coverages stay exact either way.
 
     Returns
     -------
@@ -479,10 +510,12 @@ def render(
     if not (math.isfinite(noise) and noise >= 0 and math.isfinite(blur) and blur >= 0):
         raise ValueError("noise (grey levels) and blur (pixels) must be finite and >= 0")
     kd = _sc._check_distortion(distortion)
+    style = _photo.check_style(style)
     items = []
     for k, obj in enumerate(objects):
         if not isinstance(obj, TableObject):
             raise ValueError(f"objects[{k}] must be a TableObject, got {type(obj).__name__}")
+        _photo.check_material(obj.material, f"objects[{k}]")
         prof = _as_profile(obj.profile)
         Rwo, two = _object_pose(obj, prof)
         R, t = Rc @ Rwo, Rc @ two + tc
@@ -491,7 +524,7 @@ def render(
         _sc._check_in_image(pts, (w, h), what)
         items.append((obj, prof, R, t, pts, pin))
     return _render_placed(K, Rc, tc, items, w, h, seed, noise, blur, supersample, table_colour,
-                          wall_colour, description, kd)
+                          wall_colour, description, kd, style)
 
 
 def _silhouette(prof, K, R, t, spacing, kd, what):
@@ -502,10 +535,11 @@ def _silhouette(prof, K, R, t, spacing, kd, what):
 
 
 def _render_placed(K, Rc, tc, items, w, h, seed, noise, blur, supersample, table_colour, wall_colour,
-                   description, kd=None):
+                   description, kd=None, style=None):
     rng = np.random.default_rng(int(seed))
     grid = None if kd is None else _pixel_grid(K, (h, w), kd)
-    img = _background(K, Rc, tc, (h, w), rng, table_colour, wall_colour, grid)
+    if style is None:
+        img = _background(K, Rc, tc, (h, w), rng, table_colour, wall_colour, grid)
     light = rng.uniform(-0.9, 0.9)
     placed = []
     for k, (obj, prof, R, t, points, pin) in enumerate(items):
@@ -513,18 +547,46 @@ def _render_placed(K, Rc, tc, items, w, h, seed, noise, blur, supersample, table
         centre = R @ np.array([0.0, 0.5 * (prof.y0 + prof.y1), 0.0]) + t
         colour = obj.colour if obj.colour is not None else PALETTE[int(rng.integers(len(PALETTE)))]
         placed.append((k, prof, R, t, truth, float(centre[2]), colour))
+    # the photo-like scene and the materials draw from their own stream, so that the
+    # plain renders stay as they were
+    srng = np.random.default_rng([int(seed), 1])
+    looks = []  # (material, parameters, light angle in the object's shading frame)
+    for (obj, *_), (k, prof, R, t, truth, depth, colour) in zip(items, placed):
+        if obj.material is None and style is not None:
+            mat = style.materials[int(srng.integers(len(style.materials)))]
+        else:
+            mat = _photo.check_material(obj.material, f"object {k}")
+        looks.append((mat, _photo.material_params(srng, mat), light))
+    layers = [("object", i, placed[i][5]) for i in range(len(placed))]
+    specular = 1.0
+    if style is not None:
+        img, blocks, looks = _photo_backdrop(K, Rc, tc, items, placed, looks, w, h, grid, kd, style, srng)
+        layers += [("block", j, float(np.mean(b.vertices @ Rc[2] + tc[2]))) for j, b in enumerate(blocks)]
+        specular = style.specular
     # far to near: each object is drawn over the ones behind it
-    order = sorted(range(len(placed)), key=lambda i: -placed[i][5])
+    layers.sort(key=lambda lay: -lay[2])
     covs = [None] * len(placed)
     occluded = [False] * len(placed)
-    for i in order:
-        k, prof, R, t, truth, depth, colour = placed[i]
-        cov = _coverage_in_box(truth.outline, (h, w), supersample)
-        o = truth.outline
-        box = (max(0, int(math.floor(o[:, 0].min())) - 1), max(0, int(math.floor(o[:, 1].min())) - 1),
-               min(w - 1, int(math.ceil(o[:, 0].max())) + 1), min(h - 1, int(math.ceil(o[:, 1].max())) + 1))
+    for kind, i, _ in layers:
+        if kind == "object":
+            k, prof, R, t, truth, depth, colour = placed[i]
+            cov = _coverage_in_box(truth.outline, (h, w), supersample)
+            o = truth.outline
+            box = (max(0, int(math.floor(o[:, 0].min())) - 1), max(0, int(math.floor(o[:, 1].min())) - 1),
+                   min(w - 1, int(math.ceil(o[:, 0].max())) + 1), min(h - 1, int(math.ceil(o[:, 1].max())) + 1))
+            mat, prm, la = looks[i]
+            col = _object_colour_field(truth, colour, box, la, grid, mat, prm, specular,
+                                       _behind(img, box) if mat == "glass" else None)
+        else:
+            lay = _photo.block_layer(blocks[i], K, Rc, tc, (h, w), style,
+                                     lambda poly: _coverage_in_box(poly, (h, w), min(8, supersample)),
+                                     _distorter(K, kd))
+            if lay is None:
+                continue
+            box, c, col = lay
+            cov = np.zeros((h, w))
+            cov[box[1] : box[3] + 1, box[0] : box[2] + 1] = c
         x0, y0, x1, y1 = box
-        col = _object_colour_field(truth, colour, box, light, grid)
         a = cov[y0 : y1 + 1, x0 : x1 + 1, None]
         img[y0 : y1 + 1, x0 : x1 + 1] = a * col + (1.0 - a) * img[y0 : y1 + 1, x0 : x1 + 1]
         for j in range(len(placed)):  # hide what it covers of the objects behind it
@@ -533,13 +595,17 @@ def _render_placed(K, Rc, tc, items, w, h, seed, noise, blur, supersample, table
                 if hidden.max() > 1e-9:
                     occluded[j] = True
                     covs[j] = covs[j] * (1.0 - cov)
-        covs[i] = cov
-    if blur > 0:
-        r = max(1, int(math.ceil(4 * blur)))
-        img = cv2.GaussianBlur(img, (2 * r + 1, 2 * r + 1), blur, borderType=cv2.BORDER_REPLICATE)
-    if noise > 0:
-        img = img + rng.normal(0.0, noise, img.shape)
-    image = np.clip(np.round(img), 0, 255).astype(np.uint8)
+        if kind == "object":
+            covs[i] = cov
+    if style is not None:
+        image = _photo.finish(img, srng, style, noise, blur)
+    else:
+        if blur > 0:
+            r = max(1, int(math.ceil(4 * blur)))
+            img = cv2.GaussianBlur(img, (2 * r + 1, 2 * r + 1), blur, borderType=cv2.BORDER_REPLICATE)
+        if noise > 0:
+            img = img + rng.normal(0.0, noise, img.shape)
+        image = np.clip(np.round(img), 0, 255).astype(np.uint8)
     rendered = []
     for i, (k, prof, R, t, truth, depth, colour) in enumerate(placed):
         o = truth.outline
@@ -557,8 +623,66 @@ def _render_placed(K, Rc, tc, items, w, h, seed, noise, blur, supersample, table
             f"{len(rendered)} object(s) ({', '.join(r.name for r in rendered)}) on a table, "
             f"{w}x{h} px, K = {np.round(K, 2).tolist()}, noise {noise:g}, blur {blur:g}, seed {seed}"
         ) + _sc._distortion_note(kd)
+    if style is not None:
+        description += "; " + _photo.describe(style) + "; materials " + ", ".join(lk[0] for lk in looks)
     return Rendering(image=image, K=K, camera=(Rc, tc), objects=tuple(rendered), labels=labels,
                      seed=int(seed), description=description, distortion=_sc._as_pair(kd))
+
+
+def _distorter(K, kd):
+    """Pinhole pixels -> distorted pixels (None without distortion)."""
+    if kd is None:
+        return None
+    from ._distortion import distort
+
+    return lambda uv: np.asarray(distort(np.asarray(uv, np.float64), K, np.asarray(kd, np.float64)))
+
+
+def _behind(img, box):
+    """``sample(dx, dy)``: the image (float BGR) on the pixels of ``box``, displaced by
+    ``(dx, dy)`` px (bilinear; for what a glass object shows of the scene behind)."""
+    x0, y0, x1, y1 = box
+    xs, ys = np.meshgrid(np.arange(x0, x1 + 1, dtype=np.float64), np.arange(y0, y1 + 1, dtype=np.float64))
+    src = img.astype(np.float32)
+
+    def sample(dx, dy):
+        return cv2.remap(src, (xs + dx).astype(np.float32), (ys + dy).astype(np.float32), cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_REFLECT).astype(np.float64)
+
+    return sample
+
+
+def _photo_backdrop(K, Rc, tc, items, placed, looks, w, h, grid, kd, style, srng):
+    """The photo-like background (:mod:`sorjax._photo`) with the objects' shadows and
+    reflections, the clutter blocks, and the objects' looks with the light angle of the
+    style's light in each object's shading frame."""
+    solids = []
+    L = Rc @ _photo.light_direction(style)  # camera frame
+    out = []
+    for (obj, prof, R, t, pts, pin), (k, _, _, _, truth, depth, colour), (mat, prm, _) in zip(items, placed, looks):
+        Rwo, two = Rc.T @ R, Rc.T @ (t - tc)
+        rings = _photo.solid_rings(prof, Rwo, two)
+        flat = rings.reshape(-1, 3)
+        foot = flat[:, [0, 2]].mean(0)
+        zc = flat @ Rc[2] + tc[2]
+        o = truth.outline
+        lo, hi = o.min(0), o.max(0)
+        solids.append({"rings": rings, "foot": (float(foot[0]), float(foot[1])),
+                       "radius": float(np.max(np.hypot(flat[:, 0] - foot[0], flat[:, 2] - foot[1]))),
+                       "depth": (float(zc.min()), float(zc.max())), "box": (lo[0], lo[1], hi[0], hi[1]),
+                       "size": float(np.ptp(flat, axis=0).max()), "px": float(max(hi - lo)),
+                       "colour": colour, "material": mat})
+        # u > 0 on the side of the axis image that l_s points to (to the right when l_x > 0)
+        la = math.atan2(L[0], -L[2]) * (1.0 if truth.l_s[0] >= 0 else -1.0)
+        out.append((mat, prm, float(np.clip(la, -1.4, 1.4))))
+    wall = _photo.wall_plane(style, Rc, tc, np.concatenate([s["rings"].reshape(-1, 3) for s in solids])
+                             if solids else np.zeros((0, 3)))
+    ph = srng.uniform(0.0, 1.0, 4)
+    g = _pixel_grid(K, (h, w), None) if grid is None else grid
+    img, table = _photo.backdrop(style, K, Rc, tc, (h, w), g, wall, ph)
+    blocks = _photo.place_clutter(srng, style, K, Rc, tc, (h, w), solids, wall)
+    _photo.shadows_and_reflections(img, table, style, K, Rc, tc, solids, blocks, _distorter(K, kd))
+    return img, blocks, out
 
 
 def _rough_extent(prof, K, R, t):
@@ -603,6 +727,7 @@ def random_table_scene(
     supersample: int = 32,
     max_tries: int = 100,
     distortion: Sequence[float] | None = None,
+    style=None,
 ) -> Rendering:
     """A random table scene, deterministic given ``seed``.
 
@@ -619,6 +744,7 @@ def random_table_scene(
       apart (no occlusion).
     * ``distortion``: ``(k1, k2)`` radial lens distortion (module docstring; None:
       none); the layout checks apply to the distorted outlines.
+    * ``style``: None (plain), "photo" or a :class:`PhotoStyle` (see :func:`render`).
 
     Raises RuntimeError when no such layout is found in ``max_tries`` draws.
     """
@@ -628,6 +754,7 @@ def random_table_scene(
         raise ValueError(f"n_objects must be an int from 1 to 8, got {n_objects!r}")
     w, h = _check_image_size(image_size)
     kd = _sc._check_distortion(distortion)
+    style = _photo.check_style(style)
     rng = np.random.default_rng(int(seed))
     names = [n for n in _sc.PROFILES if n != "cylinder"] if shapes is None else list(shapes)
     for nm in names:
@@ -700,5 +827,5 @@ def random_table_scene(
             f"fv={K[1, 1]:.1f} u0={K[0, 2]:.1f} v0={K[1, 2]:.1f}"
         )
         return _render_placed(K, Rc, tc, items, w, h, int(rng.integers(2**31)), float(noise), float(blur),
-                              supersample, (70, 105, 150), (200, 205, 210), desc, kd)
+                              supersample, (70, 105, 150), (200, 205, 210), desc, kd, style)
     raise RuntimeError(f"random_table_scene(seed={seed}): no valid layout in {max_tries} tries")
