@@ -674,7 +674,7 @@ def material_params(rng, material: str) -> dict:
         cuts = np.sort(rng.uniform(0.1, 0.9, 2 * n))
         return {"bands": cuts.reshape(n, 2), "colour2": rng.uniform(20, 235, 3)}
     if material == "glass":
-        return {"tint": rng.uniform(0.75, 0.95, 3), "mag": rng.uniform(0.35, 0.7), "rim": rng.uniform(0.3, 0.6)}
+        return {"tint": rng.uniform(0.85, 0.98, 3), "mag": rng.uniform(0.35, 0.7), "rim": rng.uniform(0.25, 0.5)}
     if material == "glossy":
         return {"window": np.sort(rng.uniform(-0.7, 0.2, 2)), "win_along": np.sort(rng.uniform(0.1, 0.9, 2))}
     return {}
@@ -696,7 +696,7 @@ def shade_material(material, prm, base, g, light_angle, specular, bg_sample):
         behind = bg_sample(-shift * g["l"][0], -shift * g["l"][1])
         rim = np.clip((np.abs(u) - 0.7) / 0.3, 0.0, 1.0) ** 1.5
         col = behind * prm["tint"][None, None, :] * (1.0 - prm["rim"] * rim)[..., None]
-        col += (specular * 230.0 * cosh**80 + specular * 60.0 * np.clip(1.0 - np.abs(np.abs(u) - 0.85) / 0.05, 0, 1)
+        col += (specular * 230.0 * cosh**200 + specular * 60.0 * np.clip(1.0 - np.abs(np.abs(u) - 0.85) / 0.05, 0, 1)
                 * (along > 0.2))[..., None]
         return col
     if material == "metal":

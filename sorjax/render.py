@@ -55,6 +55,7 @@ from . import scenes as _sc
 __all__ = [
     "MATERIALS",
     "PALETTE",
+    "PHOTO_SIZES",
     "PhotoCamera",
     "PhotoSet",
     "PhotoStyle",
@@ -547,16 +548,17 @@ def _render_placed(K, Rc, tc, items, w, h, seed, noise, blur, supersample, table
         centre = R @ np.array([0.0, 0.5 * (prof.y0 + prof.y1), 0.0]) + t
         colour = obj.colour if obj.colour is not None else PALETTE[int(rng.integers(len(PALETTE)))]
         placed.append((k, prof, R, t, truth, float(centre[2]), colour))
-    # the photo-like scene and the materials draw from their own stream, so that the
-    # plain renders stay as they were
+    # the photo-like scene and the materials draw from streams of their own, so that the
+    # plain renders stay as they were and the scene does not depend on the materials
     srng = np.random.default_rng([int(seed), 1])
+    mrng = np.random.default_rng([int(seed), 2])
     looks = []  # (material, parameters, light angle in the object's shading frame)
     for (obj, *_), (k, prof, R, t, truth, depth, colour) in zip(items, placed):
         if obj.material is None and style is not None:
-            mat = style.materials[int(srng.integers(len(style.materials)))]
+            mat = style.materials[int(mrng.integers(len(style.materials)))]
         else:
             mat = _photo.check_material(obj.material, f"object {k}")
-        looks.append((mat, _photo.material_params(srng, mat), light))
+        looks.append((mat, _photo.material_params(mrng, mat), light))
     layers = [("object", i, placed[i][5]) for i in range(len(placed))]
     specular = 1.0
     if style is not None:
@@ -829,3 +831,95 @@ def random_table_scene(
         return _render_placed(K, Rc, tc, items, w, h, int(rng.integers(2**31)), float(noise), float(blur),
                               supersample, (70, 105, 150), (200, 205, 210), desc, kd, style)
     raise RuntimeError(f"random_table_scene(seed={seed}): no valid layout in {max_tries} tries")
+
+
+@dataclass(frozen=True)
+class PhotoCamera:
+    """One camera of a :class:`PhotoSet`: its true ``K`` (pixels), ``image_size``
+    ``(width, height)``, its renders and their seeds (``random_table_scene(seed, K,
+    ..., style=random_style(np.random.default_rng([seed, 3])))`` gives each again)."""
+
+    K: np.ndarray
+    image_size: tuple[int, int]
+    renders: tuple[Rendering, ...]
+    seeds: tuple[int, ...] = ()
+
+
+@dataclass(frozen=True)
+class PhotoSet:
+    """A set of photo-like renders by several cameras (:func:`random_photo_set`)."""
+
+    seed: int
+    cameras: tuple[PhotoCamera, ...]
+    description: str
+
+
+#: Image sizes ``(width, height)`` the cameras of :func:`random_photo_set` choose from.
+PHOTO_SIZES = ((640, 480), (800, 600), (1024, 768), (1280, 960))
+
+
+def random_photo_set(
+    seed: int,
+    *,
+    cameras: int = 5,
+    images: int = 4,
+    objects: tuple[int, int] = (2, 3),
+    f_range: tuple[float, float] = (450.0, 1600.0),
+    fov_range_deg: tuple[float, float] = (40.0, 75.0),
+    noise: float = 1.0,
+    supersample: int = 32,
+) -> PhotoSet:
+    """A realistic calibration set, deterministic given ``seed``: ``cameras`` cameras,
+    each with ``images`` photo-like renders (:func:`random_table_scene` with a
+    :func:`random_style` per image) of 2 to 3 (``objects``) solids of revolution.
+
+    * Focal lengths: one per camera, log-uniform within equal parts of ``f_range`` (so
+      they span it), pixels.  Image size: of :data:`PHOTO_SIZES`, the one whose
+      horizontal field of view is nearest a random value in ``fov_range_deg`` (so a
+      long focal length gets a large image, as in phones and cameras).  Aspect ratio 1
+      for half the cameras, else uniform in [0.97, 1.03]; principal point within 5 % of
+      the image centre.
+    * Objects: placed as by :func:`random_table_scene` (left to right in equal slots,
+      off-centre, elevation 15 to 55 degrees), sized 150 to 280 px per 640 px of image
+      width; a layout that fails is retried with the next seed.
+
+    Every render's seed is recorded in its ``description`` and ``seed``.
+    """
+    if not (isinstance(seed, (int, np.integer)) and seed >= 0):
+        raise ValueError(f"seed must be an int >= 0, got {seed!r}")
+    if not (isinstance(cameras, (int, np.integer)) and cameras >= 1):
+        raise ValueError(f"cameras must be an int >= 1, got {cameras!r}")
+    if not (isinstance(images, (int, np.integer)) and images >= 1):
+        raise ValueError(f"images must be an int >= 1, got {images!r}")
+    lo, hi = (int(v) for v in objects)
+    if not 1 <= lo <= hi <= 8:
+        raise ValueError(f"objects must be (min, max) with 1 <= min <= max <= 8, got {objects!r}")
+    f0, f1 = (float(v) for v in f_range)
+    if not 0 < f0 <= f1:
+        raise ValueError(f"f_range must be (f_min, f_max) pixels with 0 < f_min <= f_max, got {f_range!r}")
+    rng = np.random.default_rng([int(seed), 17])
+    edges = np.exp(np.linspace(math.log(f0), math.log(f1), cameras + 1))
+    cams = []
+    for c in range(cameras):
+        f = float(np.exp(rng.uniform(math.log(edges[c]), math.log(edges[c + 1]))))
+        fov = math.radians(rng.uniform(*fov_range_deg))
+        w, h = min(PHOTO_SIZES, key=lambda s: abs(2 * math.atan(s[0] / (2 * f)) - fov))
+        a = 1.0 if rng.uniform() < 0.5 else float(rng.uniform(0.97, 1.03))
+        pp = (0.5 * w + rng.uniform(-0.05, 0.05) * w, 0.5 * h + rng.uniform(-0.05, 0.05) * h)
+        K = _sc.intrinsics(f, aspect_ratio=a, principal_point=pp)
+        renders, seeds = [], []
+        s = int(rng.integers(2**31))
+        while len(renders) < images:
+            n = int(rng.integers(lo, hi + 1))
+            style = _photo.random_style(np.random.default_rng([s, 3]))
+            try:
+                renders.append(random_table_scene(s, K, n_objects=n, image_size=(w, h), style=style, noise=noise,
+                                                  size_px=(150.0 * w / 640, 280.0 * w / 640), supersample=supersample))
+                seeds.append(s)
+            except RuntimeError:
+                pass
+            s += 1
+        cams.append(PhotoCamera(K=K, image_size=(w, h), renders=tuple(renders), seeds=tuple(seeds)))
+    desc = (f"random photo set (seed={int(seed)}): {cameras} camera(s) x {images} image(s), f "
+            + ", ".join(f"{c.K[1, 1]:.0f}" for c in cams) + " px")
+    return PhotoSet(seed=int(seed), cameras=tuple(cams), description=desc)

@@ -1,0 +1,267 @@
+"""Outlines and calibration from photo-like renders (issue 17's done-when harness).
+
+Each set is :func:`sorjax.render.random_photo_set` (seed printed): 5 cameras with f from
+450 to 1600 px (640x480 to 1280x960 images), 4 images per camera of 2-3 solids of
+revolution each, on textured tables in front of patterned walls, with clutter, cast
+shadows, reflections, glass and metal objects, defocus, noise and JPEG
+(:mod:`sorjax._photo`).  For every image, outlines come from
+
+* ``auto``  : ``sorjax.outlines_from_image(image)`` (automatic object finding);
+* ``boxes`` : ``sorjax.outlines_from_image(image, boxes)`` with the exact bounding boxes
+  grown by 8 px (with ``--boxes``);
+* ``masks`` : ``sorjax.outlines_from_mask`` of each object's exact soft mask (its
+  coverage), the reference (the ``sorjax calibrate --masks`` path).
+
+Only the public extraction functions are called, so the script measures whatever
+extraction sorjax has.  Printed per column:
+
+* found: true objects matched by an outline (intersection over union of the filled
+  outline with the object's mask >= 0.5, one outline per object); objects partly
+  hidden by clutter are counted apart (``occluded``) and left out of the outline error;
+* outline error: RMS distance (px) of a found outline's points to the exact silhouette;
+  the median over found unoccluded objects and the fraction within 1 px;
+* calibration of each camera: ``sorjax.calibrate`` (defaults: bundle, free aspect,
+  ``outline_error`` 0.1 px, ``image_size`` given) on all outlines of its images (false
+  detections included, as a user would pass them): focal error % (the larger of fu, fv),
+  ``ok`` within 2 %, ``refused`` with the reason, ``WRONG`` beyond 2 %; for every
+  intrinsic reported as determined (finite in ``K``), ``|error| / std``: "confident
+  wrong" when beyond 3 std or 5 % of f.
+
+Issue 17's targets (automatic column): >= 90 % found, median RMS <= 0.3 px, >= 90 % of
+them within 1 px, every camera ok or refused, no confident wrong K over >= 30 sets.
+
+    python experiments/photos.py [--sets 5] [--seed 0] [--boxes] [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+import warnings
+
+import cv2
+import numpy as np
+
+import sorjax
+from sorjax import render, scenes
+from sorjax.experiment._runner import enable_compilation_cache
+
+MATCH_IOU = 0.5  # a found outline is an object's when its filled area overlaps the object's mask this much
+BOX_MARGIN = 8  # px added to the exact boxes in the boxes column
+WITHIN_PX = 1.0  # outline RMS counted as "within"
+FOCAL_OK = 2.0  # % focal error counted as calibrated
+WRONG_STD, WRONG_PCT = 3.0, 5.0  # a determined intrinsic beyond either is "confident wrong"
+NAMES = ("fu", "fv", "u0", "v0")
+
+
+def _call(fn, *a, **kw):
+    """``(result or the exception, [warning texts])``: a failure never ends the run."""
+    with warnings.catch_warnings(record=True) as ws:
+        warnings.simplefilter("always")
+        try:
+            res = fn(*a, **kw)
+        except Exception as err:  # noqa: BLE001 - the harness records every failure
+            res = err
+    return res, [str(w.message) for w in ws]
+
+
+def _first_line(text: str, n: int = 110) -> str:
+    t = " ".join(str(text).split())
+    return t if len(t) <= n else t[: n - 3] + "..."
+
+
+def _filled(outline: np.ndarray, shape) -> np.ndarray:
+    m = np.zeros(shape, np.uint8)
+    cv2.fillPoly(m, [np.round(np.asarray(outline) * 16).astype(np.int32)], 1, lineType=cv2.LINE_8, shift=4)
+    return m.astype(bool)
+
+
+def match(found: list[np.ndarray], r: render.Rendering) -> list[int | None]:
+    """For each object of ``r``, the index of the found outline with the largest
+    intersection over union with its mask (>= MATCH_IOU, each outline used once)."""
+    shape = r.labels.shape
+    masks = [o.coverage >= 0.5 for o in r.objects]
+    fills = [_filled(f, shape) for f in found]
+    pairs = []
+    for i, m in enumerate(masks):
+        for j, f in enumerate(fills):
+            inter = np.count_nonzero(m & f)
+            if inter:
+                pairs.append((inter / np.count_nonzero(m | f), i, j))
+    out: list[int | None] = [None] * len(masks)
+    used = set()
+    for iou, i, j in sorted(pairs, reverse=True):
+        if iou >= MATCH_IOU and out[i] is None and j not in used:
+            out[i] = j
+            used.add(j)
+    return out
+
+
+def outline_rms(outline: np.ndarray, exact: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(scenes.distance_to_polyline(outline, exact) ** 2)))
+
+
+class Column:
+    """Tallies of one outline source."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self.objects = self.found = self.occluded = self.occluded_found = self.extra = 0
+        self.rms: list[float] = []
+        self.image_failures: list[str] = []
+        self.cameras: list[str] = []  # "ok", "refused", "WRONG"
+        self.focal_err: list[float] = []
+        self.determined = 0
+        self.confident_wrong: list[str] = []
+        self.seconds = 0.0
+
+    def add_image(self, r: render.Rendering, res, label: str) -> list[np.ndarray]:
+        self.objects += sum(not o.occluded for o in r.objects)
+        self.occluded += sum(o.occluded for o in r.objects)
+        if isinstance(res, Exception):
+            self.image_failures.append(f"{label}: {type(res).__name__}: {_first_line(res)}")
+            return []
+        m = match(res, r)
+        for o, j in zip(r.objects, m):
+            if j is None:
+                continue
+            if o.occluded:
+                self.occluded_found += 1
+                continue
+            self.found += 1
+            self.rms.append(outline_rms(res[j], o.truth.outline))
+        self.extra += len(res) - sum(j is not None for j in m)
+        return list(res)
+
+    def add_camera(self, K: np.ndarray, outlines: list[np.ndarray], size) -> str:
+        if len(outlines) < 2:
+            self.cameras.append("refused")
+            return f"refused: {len(outlines)} outline(s)"
+        cal, ws = _call(sorjax.calibrate, outlines, image_size=size)
+        if isinstance(cal, Exception):
+            self.cameras.append("refused")
+            return f"refused: {type(cal).__name__}: {_first_line(cal, 90)}"
+        est = np.asarray(cal.K)
+        est = np.array([est[0, 0], est[1, 1], est[0, 2], est[1, 2]])
+        tru = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
+        std = np.asarray(cal.std)
+        f = float(K[1, 1])
+        err_pct = 100.0 * (est - tru) / f
+        bad = []
+        for k in range(4):
+            if not np.isfinite(est[k]):
+                continue
+            self.determined += 1
+            z = abs(est[k] - tru[k]) / std[k] if np.isfinite(std[k]) and std[k] > 0 else math.inf
+            if z > WRONG_STD or abs(err_pct[k]) > WRONG_PCT:
+                bad.append(f"{NAMES[k]} {est[k]:.1f} +- {std[k]:.1f} for {tru[k]:.1f} ({z:.1f} std, {err_pct[k]:+.1f} %)")
+        self.confident_wrong += bad
+        focal = np.abs(err_pct[:2])
+        if not cal.success or not np.all(np.isfinite(est[:2])):
+            self.cameras.append("refused")
+            text = f"refused: {_first_line(cal.message, 90)}"
+        else:
+            fe = float(np.max(focal))
+            self.focal_err.append(fe)
+            ok = fe <= FOCAL_OK
+            self.cameras.append("ok" if ok else "WRONG")
+            text = f"f err {fe:5.2f} % {'ok' if ok else 'WRONG'} (std {100 * std[1] / f:.2f} %)"
+            if ws:
+                text += f"; {len(ws)} warning(s): {_first_line(ws[0], 60)}"
+        if bad:
+            text += "; CONFIDENT WRONG: " + "; ".join(bad)
+        return text
+
+    def summary(self) -> str:
+        rms = np.asarray(self.rms)
+        med = f"{np.median(rms):.3f}" if rms.size else "-"
+        within = f"{100 * np.mean(rms <= WITHIN_PX):.0f} %" if rms.size else "-"
+        cams = len(self.cameras)
+        fe = np.asarray(self.focal_err)
+        return (f"{self.name:<6} found {self.found}/{self.objects} ({100 * self.found / max(self.objects, 1):.0f} %)"
+                f" [+{self.extra} other outlines; occluded {self.occluded_found}/{self.occluded}], "
+                f"outline RMS median {med} px, within {WITHIN_PX:g} px {within}; cameras ok {self.cameras.count('ok')}"
+                f"/{cams}, refused {self.cameras.count('refused')}, WRONG {self.cameras.count('WRONG')}"
+                f" (median focal err {np.median(fe) if fe.size else float('nan'):.2f} %); confident wrong K "
+                f"{len(self.confident_wrong)} of {self.determined} determined; image failures "
+                f"{len(self.image_failures)}; extraction {self.seconds:.0f} s")
+
+
+def run_set(seed: int, args, columns: dict[str, Column]) -> None:
+    t0 = time.perf_counter()
+    ps = render.random_photo_set(seed, cameras=args.cameras, images=args.images)
+    n_img = sum(len(c.renders) for c in ps.cameras)
+    n_obj = sum(len(r.objects) for c in ps.cameras for r in c.renders)
+    n_occ = sum(o.occluded for c in ps.cameras for r in c.renders for o in r.objects)
+    print(f"set seed {seed}: {ps.description}; {n_img} images, {n_obj} objects ({n_occ} occluded); "
+          f"rendered in {time.perf_counter() - t0:.0f} s", flush=True)
+    for ci, cam in enumerate(ps.cameras):
+        K = cam.K
+        print(f"  camera {ci}: fu {K[0, 0]:.1f} fv {K[1, 1]:.1f} u0 {K[0, 2]:.1f} v0 {K[1, 2]:.1f}, "
+              f"{cam.image_size[0]}x{cam.image_size[1]}, {len(cam.renders)} images "
+              f"(random_table_scene seeds {', '.join(str(x) for x in cam.seeds)})", flush=True)
+        for name, col in columns.items():
+            outs = []
+            before = (col.found, col.objects, len(col.rms), len(col.image_failures))
+            for k, r in enumerate(cam.renders):
+                label = f"set {seed} camera {ci} image {k}"
+                t1 = time.perf_counter()
+                if name == "auto":
+                    res, _ = _call(sorjax.outlines_from_image, r.image)
+                elif name == "boxes":
+                    w, h = r.image_size
+                    bx = [(max(0, b[0] - BOX_MARGIN), max(0, b[1] - BOX_MARGIN), min(w - 1, b[2] + BOX_MARGIN),
+                           min(h - 1, b[3] + BOX_MARGIN)) for b in r.boxes]
+                    res, _ = _call(sorjax.outlines_from_image, r.image, bx)
+                else:
+                    res = []
+                    for o in r.objects:
+                        got, _ = _call(sorjax.outlines_from_mask, o.coverage)
+                        res += [] if isinstance(got, Exception) else got[:1]
+                col.seconds += time.perf_counter() - t1
+                outs += col.add_image(r, res, label)
+            rms = col.rms[before[2]:]
+            fails = col.image_failures[before[3]:]
+            cal = col.add_camera(K, outs, cam.image_size)
+            print(f"    {name:<6} found {col.found - before[0]:>2}/{col.objects - before[1]:<2} outlines {len(outs):>2}  "
+                  f"RMS med {np.median(rms) if rms else float('nan'):6.3f} px  <=1px "
+                  f"{100 * np.mean(np.asarray(rms) <= WITHIN_PX) if rms else float('nan'):4.0f} %   {cal}", flush=True)
+            for fmsg in fails[:2]:
+                print(f"           failed: {fmsg}")
+            if len(fails) > 2:
+                print(f"           ... and {len(fails) - 2} more image failure(s)")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sets", type=int, default=5, help="image sets (default 5)")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the first set; the sets are seed, seed+1, ...")
+    ap.add_argument("--cameras", type=int, default=5, help="cameras per set (default 5)")
+    ap.add_argument("--images", type=int, default=4, help="images per camera (default 4)")
+    ap.add_argument("--boxes", action="store_true", help="also extract with the exact boxes (grown by 8 px)")
+    ap.add_argument("--no-auto", action="store_true", help="skip the automatic column")
+    ap.add_argument("--quick", action="store_true", help="2 sets")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.sets = 2
+    enable_compilation_cache()
+    names = ([] if args.no_auto else ["auto"]) + (["boxes"] if args.boxes else []) + ["masks"]
+    columns = {n: Column(n) for n in names}
+    print(f"sorjax photo-like test bed: {args.sets} set(s), seeds {args.seed}..{args.seed + args.sets - 1}, "
+          f"{args.cameras} cameras x {args.images} images; columns {', '.join(names)}", flush=True)
+    t0 = time.perf_counter()
+    for s in range(args.seed, args.seed + args.sets):
+        run_set(s, args, columns)
+    print(f"summary over {args.sets} set(s) (seeds {args.seed}..{args.seed + args.sets - 1}), "
+          f"{time.perf_counter() - t0:.0f} s:")
+    for col in columns.values():
+        print("  " + col.summary())
+        for msg in col.confident_wrong[:5]:
+            print(f"         confident wrong: {msg}")
+    print(f"  targets (auto): found >= 90 %, median RMS <= 0.3 px, >= 90 % within {WITHIN_PX:g} px, every camera "
+          f"ok or refused, no confident wrong K (over >= 30 sets)")
+
+
+if __name__ == "__main__":
+    main()
