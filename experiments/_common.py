@@ -5,12 +5,13 @@ from __future__ import annotations
 import warnings
 
 
-def recorded(fn, *a, **kw):
-    """Call ``fn`` with warnings recorded: ``(result or the ValueError raised, [warning texts])``."""
+def recorded(fn, *a, errors=(ValueError,), **kw):
+    """Call ``fn`` with warnings recorded: ``(result or the exception raised of
+    ``errors``, [warning texts])``."""
     with warnings.catch_warnings(record=True) as ws:
         warnings.simplefilter("always")
         try:
             res = fn(*a, **kw)
-        except ValueError as err:
+        except errors as err:
             res = err
     return res, [str(w.message) for w in ws]

@@ -10,7 +10,9 @@ shadows, reflections, glass and metal objects, defocus, noise and JPEG
 * ``boxes`` : ``sorjax.outlines_from_image(image, boxes)`` with the exact bounding boxes
   grown by 8 px (with ``--boxes``);
 * ``masks`` : ``sorjax.outlines_from_mask`` of each object's exact soft mask (its
-  coverage), the reference (the ``sorjax calibrate --masks`` path).
+  coverage), the reference (the ``sorjax calibrate --masks`` path);
+* ``contours`` : ``cv2.findContours`` of each object's binary mask (coverage >= 0.5),
+  passed to ``sorjax.calibrate`` as they are (with ``--contours``).
 
 Only the public extraction functions are called, so the script measures whatever
 extraction sorjax has.  Printed per column:
@@ -30,7 +32,7 @@ extraction sorjax has.  Printed per column:
 Issue 17's targets (automatic column): >= 90 % found, median RMS <= 0.3 px, >= 90 % of
 them within 1 px, every camera ok or refused, no confident wrong K over >= 30 sets.
 
-    python experiments/photos.py [--sets 5] [--seed 0] [--boxes] [--quick]
+    python experiments/photos.py [--sets 5] [--seed 0] [--boxes] [--contours] [--no-auto] [--quick]
 """
 
 from __future__ import annotations
@@ -38,12 +40,12 @@ from __future__ import annotations
 import argparse
 import math
 import time
-import warnings
 
 import cv2
 import numpy as np
 
 import sorjax
+from _common import recorded
 from sorjax import render, scenes
 from sorjax.experiment._runner import enable_compilation_cache
 
@@ -57,13 +59,7 @@ NAMES = ("fu", "fv", "u0", "v0")
 
 def _call(fn, *a, **kw):
     """``(result or the exception, [warning texts])``: a failure never ends the run."""
-    with warnings.catch_warnings(record=True) as ws:
-        warnings.simplefilter("always")
-        try:
-            res = fn(*a, **kw)
-        except Exception as err:  # noqa: BLE001 - the harness records every failure
-            res = err
-    return res, [str(w.message) for w in ws]
+    return recorded(fn, *a, errors=(Exception,), **kw)
 
 
 def _first_line(text: str, n: int = 110) -> str:
@@ -214,6 +210,10 @@ def run_set(seed: int, args, columns: dict[str, Column]) -> None:
                     bx = [(max(0, b[0] - BOX_MARGIN), max(0, b[1] - BOX_MARGIN), min(w - 1, b[2] + BOX_MARGIN),
                            min(h - 1, b[3] + BOX_MARGIN)) for b in r.boxes]
                     res, _ = _call(sorjax.outlines_from_image, r.image, bx)
+                elif name == "contours":
+                    res = [c[:, 0, :].astype(np.float64) for o in r.objects
+                           for c in cv2.findContours((o.coverage >= 0.5).astype(np.uint8), cv2.RETR_EXTERNAL,
+                                                     cv2.CHAIN_APPROX_NONE)[0] if len(c) >= 8]
                 else:
                     res = []
                     for o in r.objects:
@@ -240,13 +240,16 @@ def main(argv=None):
     ap.add_argument("--cameras", type=int, default=5, help="cameras per set (default 5)")
     ap.add_argument("--images", type=int, default=4, help="images per camera (default 4)")
     ap.add_argument("--boxes", action="store_true", help="also extract with the exact boxes (grown by 8 px)")
+    ap.add_argument("--contours", action="store_true",
+                    help="also cv2.findContours outlines of each object's binary mask (coverage >= 0.5)")
     ap.add_argument("--no-auto", action="store_true", help="skip the automatic column")
     ap.add_argument("--quick", action="store_true", help="2 sets")
     args = ap.parse_args(argv)
     if args.quick:
         args.sets = 2
     enable_compilation_cache()
-    names = ([] if args.no_auto else ["auto"]) + (["boxes"] if args.boxes else []) + ["masks"]
+    names = (([] if args.no_auto else ["auto"]) + (["boxes"] if args.boxes else []) + ["masks"]
+             + (["contours"] if args.contours else []))
     columns = {n: Column(n) for n in names}
     print(f"sorjax photo-like test bed: {args.sets} set(s), seeds {args.seed}..{args.seed + args.sets - 1}, "
           f"{args.cameras} cameras x {args.images} images; columns {', '.join(names)}", flush=True)

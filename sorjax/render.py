@@ -27,7 +27,10 @@ Conventions
   away from the light is dark there), a specular stripe, a slight gradient along the
   axis.  Objects are drawn far to near; a nearer object hides what it covers of the
   ones behind (their coverage is reduced accordingly and they are marked occluded).
-  No shadows.
+  No shadows in the plain renders; ``style="photo"`` or a :class:`PhotoStyle` gives
+  photo-like scenes (textured tables and walls, clutter, cast shadows, reflections,
+  glass and metal, defocus, JPEG: :mod:`sorjax._photo`) with the same exact truth, and
+  :func:`random_photo_set` whole calibration sets of them.
 * Lens distortion (``distortion=(k1, k2)``, default None: a pinhole camera, the same
   images as without the argument): OpenCV's radial model
   (:mod:`sorjax._distortion`).  Each object's outline is its pinhole silhouette mapped
