@@ -32,13 +32,14 @@ extraction sorjax has.  Printed per column:
 Issue 17's targets (automatic column): >= 90 % found, median RMS <= 0.3 px, >= 90 % of
 them within 1 px, every camera ok or refused, no confident wrong K over >= 30 sets.
 
-    python experiments/photos.py [--sets 5] [--seed 0] [--boxes] [--contours] [--no-auto] [--quick]
+    python experiments/photos.py [--sets 5] [--seed 0] [--boxes] [--contours] [--no-auto] [--save DIR] [--quick]
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import time
 
 import cv2
@@ -110,7 +111,7 @@ class Column:
         self.focal_err: list[float] = []
         self.determined = 0
         self.confident_wrong: list[str] = []
-        self.seconds = 0.0
+        self.seconds = self.cal_seconds = 0.0
 
     def add_image(self, r: render.Rendering, res, label: str) -> list[np.ndarray]:
         self.objects += sum(not o.occluded for o in r.objects)
@@ -134,7 +135,9 @@ class Column:
         if len(outlines) < 2:
             self.cameras.append("refused")
             return f"refused: {len(outlines)} outline(s)"
+        t0 = time.perf_counter()
         cal, ws = _call(sorjax.calibrate, outlines, image_size=size)
+        self.cal_seconds += time.perf_counter() - t0
         if isinstance(cal, Exception):
             self.cameras.append("refused")
             return f"refused: {type(cal).__name__}: {_first_line(cal, 90)}"
@@ -181,7 +184,7 @@ class Column:
                 f"/{cams}, refused {self.cameras.count('refused')}, WRONG {self.cameras.count('WRONG')}"
                 f" (median focal err {np.median(fe) if fe.size else float('nan'):.2f} %); confident wrong K "
                 f"{len(self.confident_wrong)} of {self.determined} determined; image failures "
-                f"{len(self.image_failures)}; extraction {self.seconds:.0f} s")
+                f"{len(self.image_failures)}; extraction {self.seconds:.0f} s, calibration {self.cal_seconds:.0f} s")
 
 
 def run_set(seed: int, args, columns: dict[str, Column]) -> None:
@@ -192,6 +195,13 @@ def run_set(seed: int, args, columns: dict[str, Column]) -> None:
     n_occ = sum(o.occluded for c in ps.cameras for r in c.renders for o in r.objects)
     print(f"set seed {seed}: {ps.description}; {n_img} images, {n_obj} objects ({n_occ} occluded); "
           f"rendered in {time.perf_counter() - t0:.0f} s", flush=True)
+    if args.save:
+        os.makedirs(args.save, exist_ok=True)
+        for ci, cam in enumerate(ps.cameras):
+            for k, r in enumerate(cam.renders):
+                stem = os.path.join(args.save, f"set{seed}_cam{ci}_img{k}")
+                cv2.imwrite(stem + ".png", r.image)
+                cv2.imwrite(stem + "_labels.png", r.labels.astype(np.uint8))
     for ci, cam in enumerate(ps.cameras):
         K = cam.K
         print(f"  camera {ci}: fu {K[0, 0]:.1f} fv {K[1, 1]:.1f} u0 {K[0, 2]:.1f} v0 {K[1, 2]:.1f}, "
@@ -243,6 +253,8 @@ def main(argv=None):
     ap.add_argument("--contours", action="store_true",
                     help="also cv2.findContours outlines of each object's binary mask (coverage >= 0.5)")
     ap.add_argument("--no-auto", action="store_true", help="skip the automatic column")
+    ap.add_argument("--save", metavar="DIR", help="write each image (PNG of the JPEG-decoded render) and its label "
+                                                  "image (object k = k + 1) to DIR")
     ap.add_argument("--quick", action="store_true", help="2 sets")
     args = ap.parse_args(argv)
     if args.quick:

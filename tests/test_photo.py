@@ -137,14 +137,13 @@ def test_bad_style_is_refused():
 
 
 def test_random_photo_set():
-    ps = R.random_photo_set(2, cameras=2, images=1, f_range=(450.0, 1600.0))
-    again = R.random_photo_set(2, cameras=2, images=1, f_range=(450.0, 1600.0))
-    assert len(ps.cameras) == 2
+    # short focal lengths: small images, a cheap test (determinism: the renders' own test)
+    ps = R.random_photo_set(2, cameras=2, images=1, objects=(2, 2), f_range=(450.0, 700.0))
+    assert len(ps.cameras) == 2 and ps.seed == 2
     fs = [c.K[1, 1] for c in ps.cameras]
-    assert 450.0 <= fs[0] <= np.sqrt(450.0 * 1600.0) <= fs[1] <= 1600.0  # one per log-half of the range
-    for c, d in zip(ps.cameras, again.cameras):
-        assert c.image_size in R.PHOTO_SIZES and len(c.renders) == 1
-        assert np.array_equal(c.K, d.K) and np.array_equal(c.renders[0].image, d.renders[0].image)
+    assert 450.0 <= fs[0] <= np.sqrt(450.0 * 700.0) <= fs[1] <= 700.0  # one per log-half of the range
+    for c in ps.cameras:
+        assert c.image_size in R.PHOTO_SIZES and len(c.renders) == 1 and len(c.seeds) == 1
         r = c.renders[0]
-        assert r.image.shape == (c.image_size[1], c.image_size[0], 3) and 2 <= len(r.objects) <= 3
-        assert np.array_equal(r.K, c.K)
+        assert r.image.shape == (c.image_size[1], c.image_size[0], 3) and len(r.objects) == 2
+        assert np.array_equal(r.K, c.K) and "photo style" in r.description
