@@ -1239,11 +1239,11 @@ def outlines_from_image(
         gives the plain array) with what the image said about it:
 
         * ``outline_error`` (float, px): estimated RMS distance of the outline from the
-          object's true edge, from the data: the larger of the edge estimate (scatter
-          of the confirmed edge points about the smooth outline over the points per
-          smoothing window, the RMS disagreement between the unmixed and the gradient
-          edge, half a pixel times the fraction of points whose edge was ambiguous) and
-          ``symmetry_rms / sqrt 2``; NaN with ``refine=False``.  Read it with
+          object's true edge, from the data: ``sqrt(e^2 + symmetry_rms^2)``, ``e`` the
+          edge estimate (scatter of the confirmed edge points about the smooth outline
+          over the points per smoothing window, the RMS disagreement between the
+          unmixed and the gradient edge, half a pixel times the fraction of points
+          whose edge was ambiguous); NaN with ``refine=False``.  Read it with
           ``getattr(o, "outline_error", nan)``: it is what to declare as the
           calibration's outline error for outlines from images;
         * ``symmetry_rms`` (px): RMS residual of the harmonic homology fitted to the
