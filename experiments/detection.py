@@ -171,7 +171,7 @@ def ycb(args):
     print("(b) ycb-video: outline RMS distance (px) from the image to outlines_from_mask of the ground-truth label")
     vals = {"auto": [], "box": []}
     for im in meta["images"]:
-        if "mask" not in im:
+        if not im.get("mask"):
             continue
         img = cv2.imread(os.path.join(root, im["image"]))
         lab = cv2.imread(os.path.join(root, im["mask"]), cv2.IMREAD_UNCHANGED)
@@ -194,7 +194,7 @@ def ycb(args):
                     line += f"  {mode}: not found"
                     vals[mode].append(math.nan)
                 else:
-                    v = rms_to(o, S.resample_closed(ref, 4 * len(ref)) if hasattr(S, "resample_closed") else ref)
+                    v = rms_to(o, ref)
                     vals[mode].append(v)
                     line += f"  {mode}: {v:.3f} px (est. {float(getattr(o, 'outline_error', math.nan)):.2f})"
             print(line)
