@@ -857,12 +857,17 @@ def _grabcut(img: np.ndarray, mask: np.ndarray | None, rect, iterations: int) ->
     return (m == cv2.GC_FGD) | (m == cv2.GC_PR_FGD)
 
 
-def _largest_component(fg: np.ndarray) -> np.ndarray:
-    """The largest 8-connected component of ``fg``, holes filled."""
+def _largest_component(fg: np.ndarray, within=None) -> np.ndarray:
+    """The largest 8-connected component of ``fg`` (with ``within`` = ``(x0, y0, x1,
+    y1)``, inclusive: the one with the most pixels inside that box), holes filled."""
     n, lab, stats, _ = cv2.connectedComponentsWithStats(fg.astype(np.uint8), connectivity=8)
     if n <= 1:
         return np.zeros_like(fg, dtype=bool)
-    k = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    if within is None:
+        k = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    else:
+        x0, y0, x1, y1 = within
+        k = int(np.argmax(np.bincount(lab[y0:y1 + 1, x0:x1 + 1].ravel(), minlength=n)[1:])) + 1
     comp = lab == k
     # fill holes: outer boundary only
     cnts, _ = cv2.findContours(comp.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
@@ -1035,27 +1040,37 @@ def _crop_box(box, shape, margin_frac=0.15, margin_min=12):
 def _segment_box(img, box, k, *, iterations, min_area, init=None):
     """GrabCut of the object in ``box``: ``(crop window, foreground in it)``, or None with a
     warning when nothing usable is found or the box cuts the object.  ``init``: GrabCut's
-    initial labels on the crop window ``_crop_box(box)`` (None: from the box)."""
+    initial labels on the crop window ``_crop_box(box)`` (None: from the box).
+
+    A box is a hint, not a wall: GrabCut runs on the box grown by
+    ``DetectOptions.box_grow`` (so that a box drawn tight around the object still leaves
+    GrabCut a background band all round) and keeps the region with the most pixels inside
+    the box given; the object is cut only when it reaches a side of the grown box."""
+    from ._detect import DetectOptions, grow_box
+
     H, W = img.shape[:2]
+    given = box
+    if init is None:
+        box = grow_box(box, (H, W), DetectOptions())
     cx0, cy0, cx1, cy1 = _crop_box(box, (H, W))
     _check_window((cy0, cy1, cx0, cx1), "image")
     crop = np.ascontiguousarray(img[cy0:cy1, cx0:cx1])
     if init is None:
         rect = (box[0] - cx0, box[1] - cy0, box[2] - box[0] + 1, box[3] - box[1] + 1)
         fg = _grabcut(crop, None, rect, iterations)
+        fg = _largest_component(fg, (given[0] - cx0, given[1] - cy0, given[2] - cx0, given[3] - cy0))
     else:
-        fg = _grabcut(crop, np.ascontiguousarray(init), None, iterations)
-    fg = _largest_component(fg)
+        fg = _largest_component(_grabcut(crop, np.ascontiguousarray(init), None, iterations))
     if fg.sum() < max(min_area, 1.0):
         warnings.warn(
-            f"box {k} {tuple(box)}: no object found inside (GrabCut kept {int(fg.sum())} px); "
-            "check the box encloses the object with a small margin",
+            f"box {k} {tuple(given)}: no object found inside (GrabCut kept {int(fg.sum())} px); "
+            "check the box encloses the object",
             stacklevel=3,
         )
         return None
     if init is None:
-        # GrabCut forces everything outside the box to background: an object reaching a
-        # side of the box (one that is not on the image border) was cut by the box
+        # GrabCut forces everything outside the (grown) box to background: an object
+        # reaching a side of it (one that is not on the image border) was cut by the box
         bx0, by0, bx1, by1 = box[0] - cx0, box[1] - cy0, box[2] - cx0, box[3] - cy0
         sides = {
             "left": (box[0] > 0, fg[by0 : by1 + 1, bx0]),
@@ -1066,8 +1081,9 @@ def _segment_box(img, box, k, *, iterations, min_area, init=None):
         cut = [name for name, (inside_image, line) in sides.items() if inside_image and line.sum() > 2]
         if cut:
             warnings.warn(
-                f"box {k} {tuple(box)}: the object reaches the box's {', '.join(cut)} side, so "
-                "the box cuts it (or the segmentation leaked); refused. Enlarge the box",
+                f"box {k} {tuple(given)}: the object reaches the {', '.join(cut)} side of the box (grown by "
+                f"{DetectOptions().box_grow:.0%}), so the box cuts it (or the segmentation leaked); refused. "
+                "Enlarge the box",
                 stacklevel=3,
             )
             return None
@@ -1131,53 +1147,31 @@ def _auto_init(comp: np.ndarray, shape, window, r: int) -> np.ndarray:
     return init[cy0 - ey0:cy1 - ey0, cx0 - ex0:cx1 - ex0]
 
 
-def _auto_candidates(img: np.ndarray, *, iterations: int, min_area: float, max_side: int = 640):
-    """Salient objects: GrabCut from the whole image minus a border band (at most
-    ``max_side`` px wide), then connected components that look like a solid object."""
-    H, W = img.shape[:2]
-    s = min(1.0, max_side / max(H, W))
-    small = img if s == 1.0 else cv2.resize(img, (max(16, round(W * s)), max(16, round(H * s))),
-                                              interpolation=cv2.INTER_AREA)
-    h, w = small.shape[:2]
-    band = max(5, int(round(0.015 * min(h, w))))
-    fg = _grabcut(small, None, (band, band, w - 2 * band, h - 2 * band), iterations)
-    fg = cv2.morphologyEx(fg.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
-    n, lab, stats, _ = cv2.connectedComponentsWithStats(fg, connectivity=8)
-    cands, notes = [], []
-    area_min = max(min_area * s * s, 2e-3 * h * w)
-    for c in range(1, n):
-        x, y, bw, bh, area = stats[c]
-        if area < area_min:
-            continue
-        comp = lab == c
-        cnts, _ = cv2.findContours(comp.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-        hull = cv2.convexHull(np.concatenate(cnts))
-        solidity = area / max(cv2.contourArea(hull), 1.0)
-        box = (x / s, y / s, (x + bw - 1) / s, (y + bh - 1) / s)
-        where = f"x {box[0]:.0f}..{box[2]:.0f}, y {box[1]:.0f}..{box[3]:.0f}"
-        if x <= band or y <= band or x + bw >= w - band or y + bh >= h - band:
-            notes.append(f"a region at {where} reaches the image's border band (cut by the frame, or background)")
-            continue
-        if min(bw, bh) < 8 or solidity < 0.35:
-            notes.append(f"a region at {where} does not look like a solid object (solidity {solidity:.2f})")
-            continue
-        cands.append((area, comp, box))
-    cands.sort(key=lambda c: -c[0])
-    return cands, s, notes
-
-
 def _finish_all(src: _Image, segs, *, refine, min_area, smooth, border) -> list[np.ndarray]:
-    """Outlines of the segmented objects of one image, with one unmixing band for all."""
+    """Outlines of the segmented objects ``(index, box, window, fg, symmetry_rms)`` of one
+    image, with one unmixing band for all, each moved onto the image's edges when
+    ``refine`` (:func:`sorjax._detect.refine_to_edges`), as :class:`ImageOutline` arrays."""
+    from ._detect import DetectOptions, ImageOutline, outline_quality, refine_to_edges
+
     inner = None
     if refine and segs:
         inner = _inner_band([_edge_sharpness(lambda y0, y1, x0, x1, w=w: src.f64(w[1] + y0, w[1] + y1, w[0] + x0,
                                                                               w[0] + x1), fg)
-                             for _, _, w, fg in segs])
+                             for _, _, w, fg, _ in segs])
     out = []
-    for k, b, w, fg in segs:
+    for k, b, w, fg, sym in segs:
         p = _finish(src, b, k, w, fg, inner=inner, min_area=min_area, smooth=smooth, border=border)
-        if p is not None:
-            out.append(p)
+        if p is None:
+            continue
+        if not refine:
+            out.append(ImageOutline(p, symmetry_rms=sym))
+            continue
+        q, stats = refine_to_edges((src.f64, src.shape), p, DetectOptions())
+        p = _start_at_top(_clean_loop(q))
+        if border == "cut":
+            H, W = src.shape
+            p = np.column_stack([np.clip(p[:, 0], -0.5, W - 0.5), np.clip(p[:, 1], -0.5, H - 0.5)])
+        out.append(ImageOutline(p, **outline_quality(p, stats)))
     return out
 
 
@@ -1200,15 +1194,20 @@ def outlines_from_image(
         (H, W) and BGRA are accepted.
     boxes : sequence of (x0, y0, x1, y1), optional
         One box per object, in pixels (top-left and bottom-right corners, inclusive),
-        enclosing the whole object with a margin of a few pixels.  Each object is
-        segmented by ``cv2.grabCut`` initialised with its box.  Without boxes the
-        objects are found automatically: GrabCut on the image (reduced to at most 640 px
-        wide) initialised with all of it but a border band (1.5 % of the smaller side,
-        at least 5 px) as probable foreground; its connected regions that look like
-        solid objects (area >= 0.2 % of the image, solidity >= 0.35, clear of the border
-        band) are then segmented again at full resolution, each from its own region.
-        A plain background that reaches the image border all round works best; objects
-        must not touch each other (touching objects give one merged outline).
+        around the object; it may be tight.  Each object is segmented by
+        ``cv2.grabCut`` initialised with its box grown by 15 % of its larger side (at
+        least 8 px; GrabCut needs background inside its rectangle), keeping the region
+        with the most pixels inside the box given; an object reaching the grown box's
+        side is refused as cut.  Without boxes the objects are found automatically
+        (:mod:`sorjax._detect`): proposals from colour clusters, saliency, smooth
+        (untextured) regions and GrabCut from the whole image minus a border band, on
+        the image reduced to at most 640 px; each proposal is segmented by GrabCut and
+        kept when a harmonic homology maps its outline onto itself (the symmetry of a
+        surface of revolution's outline: :func:`sorjax.fit_homology`, residual at most
+        about 1 px RMS); every other region is dropped with a warning saying why (not
+        symmetric, a leak or merged neighbour, cut by the border, ...).  Objects must
+        not touch each other (touching objects give one merged outline, which is
+        usually dropped as not symmetric).
     min_area : float
         Smallest object kept, pixels^2.
     smooth : float
@@ -1222,7 +1221,10 @@ def outlines_from_image(
         sensor noise, against 0.25 px for the GrabCut mask; the band of pixels unmixed
         widens from 1.5 to 2.5 px when the image's edges look blurred, which keeps about
         0.2 px at a blur of 0.8 px; more blur degrades it: about 0.5 px at 1.2 px).
-        Without it the binary GrabCut mask is used.
+        Then each outline point is checked against the colour edge along its normal
+        (:func:`sorjax._detect.refine_to_edges`: gradient maximum, ambiguous points
+        rejected) and moved where the two disagree, and the outline's error is
+        estimated.  Without it the binary GrabCut mask is used.
     iterations : int
         GrabCut iterations.
 
@@ -1232,7 +1234,22 @@ def outlines_from_image(
         One outline per object (conventions of :func:`outlines_from_mask`; pixel centres
         at integer coordinates), in box order with boxes, largest first without.
         Objects that cannot be segmented, that a box cuts or that touch the image border
-        are left out with a warning that says why.
+        are left out with a warning that says why.  Each outline is a
+        ``sorjax._detect.ImageOutline`` (an ``np.ndarray`` subclass; ``np.asarray``
+        gives the plain array) with what the image said about it:
+
+        * ``outline_error`` (float, px): estimated RMS distance of the outline from the
+          object's true edge, from the data: ``sqrt(e^2 + symmetry_rms^2)``, ``e`` the
+          edge estimate (scatter of the confirmed edge points about the smooth outline
+          over the points per smoothing window, the RMS disagreement between the
+          unmixed and the gradient edge, half a pixel times the fraction of points
+          whose edge was ambiguous); NaN with ``refine=False``.  Read it with
+          ``getattr(o, "outline_error", nan)``: it is what to declare as the
+          calibration's outline error for outlines from images;
+        * ``symmetry_rms`` (px): RMS residual of the harmonic homology fitted to the
+          outline (robust fit);
+        * ``edge_contrast`` (8-bit grey levels): median colour step across the edge;
+        * ``accepted``: fraction of the points whose edge was confirmed on the image.
 
     Raises
     ------
@@ -1252,7 +1269,7 @@ def outlines_from_image(
         for k, b in enumerate(bxs):
             sg = _segment_box(img, b, k, iterations=int(iterations), min_area=min_area)
             if sg is not None:
-                segs.append((k, b) + sg)
+                segs.append((k, b) + sg + (math.nan,))
         out = _finish_all(src, segs, refine=refine, min_area=min_area, smooth=smooth, border=border)
         if not out:
             raise ValueError(
@@ -1260,24 +1277,33 @@ def outlines_from_image(
                 "warnings); check that each box encloses one whole object with a small margin"
             )
         return out
-    cands, s, notes = _auto_candidates(img, iterations=int(iterations), min_area=min_area)
+    from ._detect import DetectOptions, find_objects
+
+    objects, notes, s = find_objects(img, iterations=int(iterations), min_area=min_area, o=DetectOptions())
     for note in notes:
-        warnings.warn(f"automatic detection: {note}; ignored", stacklevel=2)
-    if not cands:
+        warnings.warn(f"automatic detection: {note}; dropped", stacklevel=2)
+    if not objects:
         raise ValueError(
-            "no object found in the image: automatic detection (GrabCut from the image minus a "
-            "border band) found no solid foreground region clear of the border"
-            + (f" ({len(notes)} region(s) ignored, see the warnings)" if notes else "")
+            "no object found in the image: automatic detection (proposals from colour, saliency, smooth regions "
+            "and the border, each segmented by GrabCut and judged by the symmetry of its outline) found no "
+            "surface of revolution"
+            + (f" ({len(notes)} region(s) dropped, see the warnings)" if notes else "")
             + f". {_hint('boxes')[:1].upper()}{_hint('boxes')[1:]}"
         )
-    for k, (_, comp, box) in enumerate(cands):
+    for k, (comp, sym) in enumerate(objects):
+        ys, xs = np.nonzero(comp)
+        box = (xs.min() / s, ys.min() / s, (xs.max() + 1) / s - 1, (ys.max() + 1) / s - 1)
         r = max(2, int(round(2.0 / s)))
         ib = (max(0, int(box[0]) - 2 * r), max(0, int(box[1]) - 2 * r),
               min(W - 1, int(math.ceil(box[2])) + 2 * r), min(H - 1, int(math.ceil(box[3])) + 2 * r))
+        if s == 1.0:  # the segmentation that was judged
+            cx0, cy0, cx1, cy1 = _crop_box(ib, (H, W))
+            segs.append((k, ib, (cx0, cy0, cx1, cy1), comp[cy0:cy1, cx0:cx1], sym))
+            continue
         init = _auto_init(comp, (H, W), _crop_box(ib, (H, W)), r)
         sg = _segment_box(img, ib, k, iterations=int(iterations), min_area=min_area, init=init)
         if sg is not None:
-            segs.append((k, ib) + sg)
+            segs.append((k, ib) + sg + (sym,))
     out = _finish_all(src, segs, refine=refine, min_area=min_area, smooth=smooth, border=border)
     if not out:
         raise ValueError(f"no object outline could be extracted (see the warnings); {_hint('boxes')}")
