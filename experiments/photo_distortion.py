@@ -10,7 +10,8 @@ and ``"k1"`` at the default outline error (0.1 px) and at 0 (masks taken as exac
 
 With ``--cli`` each set goes through the command line instead, as a user would run it:
 the renders and their label masks are written as PNG files to a temporary folder and
-``sorjax calibrate IMG... --masks MASK... --distortion k1 --out camera.yaml`` is run on
+``sorjax calibrate IMG... --masks MASK... --distortion k1 --aspect-ratio 1 --out camera.yaml``
+(square pixels, as rendered) is run on
 them (:func:`sorjax.cli.main`); the numbers are read back from the camera file's JSON
 twin.  ``--vary`` draws each set's camera (f uniform in [600, 1000] px, the principal
 point within 5 % of the image centre; seed ``1000 + set``) instead of K = 800 px.
@@ -101,7 +102,8 @@ def through_cli(st: int, K, renders, k1: float) -> None:
             cv2.imwrite(str(masks[-1]), r.labels.astype(np.uint8))
         for dist in ("none", "k1"):
             out = d / f"camera_{dist}.yaml"
-            argv = ["calibrate", *map(str, imgs), "--masks", *map(str, masks), "--distortion", dist, "--out", str(out)]
+            argv = ["calibrate", *map(str, imgs), "--masks", *map(str, masks), "--distortion", dist,
+                    "--aspect-ratio", "1", "--out", str(out)]
             t0 = time.perf_counter()
             err = io.StringIO()
             with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):

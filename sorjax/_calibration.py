@@ -601,17 +601,17 @@ def model_notes(r, outline_error: float, fixed=None) -> list[str]:
     notes = []
     if np.isfinite(float(ch.aspect_z)) and float(ch.aspect_z) >= Options().consistency_z:
         notes.append(
-            _aspect_text(ch) + f", within what the declared outline error ({float(outline_error):g} px) could "
+            _aspect_text(ch) + f", within what the outline error allowed for ({float(outline_error):g} px) could "
             "cause. The standard deviations include the difference between the fixed and the free estimates; "
             "if the aspect ratio is not known exactly, pass aspect_ratio=None.")
     if _released(ch.lens_p, ch.lens_px):
         notes.append(
-            _lens_text(ch) + f", within what the declared outline error ({float(outline_error):g} px) could cause. "
+            _lens_text(ch) + f", within what the outline error allowed for ({float(outline_error):g} px) could cause. "
             "The standard deviations include the shift of K that this step makes. Calibrate with distortion='k1' "
             "(command line: --distortion k1) to estimate the distortion with K.")
     if _released(ch.fixed_p, ch.fixed_px):
         notes.append(
-            _fixed_text(ch, fixed) + f", within what the declared outline error ({float(outline_error):g} px) "
+            _fixed_text(ch, fixed) + f", within what the outline error allowed for ({float(outline_error):g} px) "
             "could cause. The standard deviations include that shift; if these values are not known exactly, "
             "leave them free.")
     if float(ch.inflation) > 1.0:
@@ -632,18 +632,18 @@ def details_for(r, h, points, method: str, a, outline_error: float, image_size=N
         ch = r.checks
         lim = f"{Options().perspective_factor * float(outline_error):.2g}"
         if int(ch.culprit) == CULPRIT_ASPECT:
-            return (_aspect_text(ch) + f", more than the declared outline error ({float(outline_error):g} px; "
+            return (_aspect_text(ch) + f", more than the outline error allowed for ({float(outline_error):g} px; "
                     f"needs < {lim} px) can explain. Pass aspect_ratio=None to estimate it, or the right value "
                     "(resized or non-square-pixel images have fu / fv != 1).")
         if int(ch.culprit) == CULPRIT_LENS:
-            return (_lens_text(ch) + f", more than the declared outline error ({float(outline_error):g} px; needs "
+            return (_lens_text(ch) + f", more than the outline error allowed for ({float(outline_error):g} px; needs "
                     f"< {lim} px) can explain. Calibrate with distortion='k1' (command line: --distortion k1; "
                     "'k1k2' for a strong wide-angle lens), or undistort the images first.")
         if int(ch.culprit) == CULPRIT_FIXED:
             return (_fixed_text(ch, fixed) + f", more than the declared outline error ({float(outline_error):g} "
                     f"px; needs < {lim} px) can explain. Leave them free, or give the right values (a cropped or "
                     "resized image moves the principal point and scales the focal length).")
-        return (_views_text(ch) + f", more than the declared outline error ({float(outline_error):g} px; needs < "
+        return (_views_text(ch) + f", more than the outline error allowed for ({float(outline_error):g} px; needs < "
                 f"{lim} px) can explain. Were all views taken with the same camera and zoom, uncropped and "
                 "unresized? Is every outline a surface of revolution (not a flat symmetric shape)? Leave out the "
                 "views that disagree, or calibrate each camera on its own.")
