@@ -289,8 +289,8 @@ def checked_residuals(y, problem: BundleProblem, hints=None):
     ``hints`` (None: ``r`` again)."""
     if problem.n_dist:
         x = distorted_transfer(y, problem)
-        d, t, d_near = jax.vmap(lambda f, x, h: checked_distances(f, x, h), in_axes=(0, 0, None if hints is None else 0))(
-            problem.fields, x, hints)
+        d, t, d_near = jax.vmap(checked_distances, in_axes=(0, 0, None if hints is None else 0))(problem.fields, x,
+                                                                                                   hints)
         w = problem.weights
         return (d * w).reshape(-1), t, (d_near * w).reshape(-1)
     v, l = pole_polar_pairs(y, problem)
