@@ -43,11 +43,17 @@ One run prints, on this machine:
    sharded, :class:`sorjax.core.TrialSharder`), fresh cache, to compare with one
    device's compiled loop.
 
+With ``--components`` the trial program's parts (the per-view fits, the methods, one
+bundle, its seed loop, covariance and no-perspective fit, the model checks' view
+scores) are traced and compiled alone: the size of each one's StableHLO and its compile
+time, where a cut of the compilation pays (the parts overlap).
+
 A table of every measure with its target and a pass/miss mark closes the output.
 
     python experiments/speed.py                       # full Table 1 (1400 trials)
     python experiments/speed.py --trials 2            # 2 trials per cell (28), a smoke run
     python experiments/speed.py --trials 10 --devices 2
+    python experiments/speed.py --trials 1 --skip-quick --components
 """
 
 from __future__ import annotations
