@@ -43,11 +43,17 @@ One run prints, on this machine:
    sharded, :class:`sorjax.core.TrialSharder`), fresh cache, to compare with one
    device's compiled loop.
 
+With ``--components`` the trial program's parts (the per-view fits, the methods, one
+bundle, its seed loop, covariance and no-perspective fit, the model checks' view
+scores) are traced and compiled alone: the size of each one's StableHLO and its compile
+time, where a cut of the compilation pays (the parts overlap).
+
 A table of every measure with its target and a pass/miss mark closes the output.
 
     python experiments/speed.py                       # full Table 1 (1400 trials)
     python experiments/speed.py --trials 2            # 2 trials per cell (28), a smoke run
     python experiments/speed.py --trials 10 --devices 2
+    python experiments/speed.py --trials 1 --skip-quick --components
 """
 
 from __future__ import annotations
@@ -538,6 +544,56 @@ def _ms(s):
     return f"{1000 * s:.1f} ms"
 
 
+def components(points: np.ndarray, opts, methods: tuple[str, ...]) -> list[tuple[str, float, float, float]]:
+    """Where the trial program's compilation goes: each part traced and lowered alone
+    (``jax.jit(f).lower``), the size of its StableHLO text and the time XLA takes to
+    compile it, for one trial's ``points`` (V, M, 2).  The parts overlap (the methods
+    hold the bundles, a bundle its covariance and no-perspective fit).  Returns rows
+    ``(name, trace + lower s, MB of text, compile s)``."""
+    import jax
+    import jax.numpy as jnp
+
+    from sorjax import _bundle as B
+    from sorjax import core
+    from sorjax.core import _calibrate as C
+    from sorjax.core import _checks as CH
+    from sorjax.experiment._trials import _method_args
+
+    names = tuple(_method_args(m)[0] for m in methods)
+    aspects = np.array([_method_args(m)[1] for m in methods])
+    P = jnp.asarray(points)
+    homs = jax.jit(lambda p: core.fit_homologies(p, opts, True))(P)
+    c = jax.jit(lambda p, h: C._common(p, h, jnp.ones(p.shape[0], bool), opts))(P, homs)
+    seeds, seed_ok = B.bundle_seeds(homs.v_x, homs.l_s, c.used, c.T, jnp.nan)
+    prob = B.with_model(c.problem, jnp.nan)
+    y = jax.jit(lambda p, l, s, so: B.fit_bundle(p, l, s, so, opts)[0])(prob, c.l_n, seeds, seed_ok)
+    parts = [
+        ("per-view fits (fit_homologies)", lambda p: core.fit_homologies(p, opts, True), (P,)),
+        ("the methods (calibrate_methods)", lambda p, h: C.calibrate_methods(p, h, names, aspects, options=opts),
+         (P, homs)),
+        ("  one bundle (bundle_estimate)", lambda c, s, so: B.bundle_estimate.__wrapped__(
+            c.points_n, c.used, c.inliers, c.l_n, s, so, jnp.nan, c.T, opts, base=c.problem), (c, seeds, seed_ok)),
+        ("    its seed loop (fit_bundle)", lambda p, l, s, so: B.fit_bundle(p, l, s, so, opts), (prob, c.l_n, seeds,
+                                                                                                   seed_ok)),
+        ("    covariance", lambda y, p, T: B.covariance.__wrapped__(y, p, T), (y, prob, c.T)),
+        ("    no-perspective fit", lambda y, p: B._orthographic_fit(y, p), (y, prob)),
+        ("  view scores (model checks)", lambda y, c: CH.view_scores(y, c.points_n, c.used, c.inliers, jnp.nan, c.T,
+                                                                       opts, base=c.problem), (y, c)),
+    ]
+    rows = []
+    for name, f, args in parts:
+        t0 = time.perf_counter()
+        lowered = jax.jit(f).lower(*args)
+        t1 = time.perf_counter()
+        size = len(lowered.as_text()) / 1e6
+        t2 = time.perf_counter()
+        lowered.compile()
+        rows.append((name, t1 - t0, size, time.perf_counter() - t2))
+        print(f"    {name:<34} trace + lower {t1 - t0:5.1f} s  {size:5.2f} MB StableHLO  compile "
+              f"{rows[-1][3]:5.1f} s", flush=True)
+    return rows
+
+
 def _mark(ok):
     return "-" if ok is None else ("pass" if ok else "MISS")
 
@@ -555,6 +611,9 @@ def main(argv=None):
     p.add_argument("--breakdown", action="store_true",
                    help="also time the per-view fits alone (one more compilation, about a minute)")
     p.add_argument("--skip-quick", action="store_true", help="skip the table1-quick subprocess")
+    p.add_argument("--components", action="store_true",
+                   help="also trace and compile the trial program's parts alone: StableHLO size and compile time "
+                        "of each (a few minutes)")
     p.add_argument("--timeout", type=float, default=1800.0, help="limit of each subprocess, s")
     p.add_argument("--table-json", action="store_true", help=argparse.SUPPRESS)  # the --devices subprocess
     a = p.parse_args(argv)
@@ -602,6 +661,10 @@ def main(argv=None):
               f"{_ms(tab['warm_trial_s'] - t_fits)}; their solver steps at the floor: fits "
               f"{_ms(fl['floor_trial_s'] - fl['bundle_steps'] * fl['t_bundle_s'])}, bundles "
               f"{_ms(fl['bundle_steps'] * fl['t_bundle_s'])}")
+
+    if a.components:
+        print("    the trial program's parts compiled alone (they overlap):", flush=True)
+        components(timed.points[0], opts, tab["methods"])
 
     print(f"[2] numpy/scipy baseline on {a.baseline_trials} of the same trials (fits + IIb + unit bundle) ...",
           flush=True)

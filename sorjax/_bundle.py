@@ -62,10 +62,10 @@ from jaxtyping import Array, Float
 from ._camera import intrinsics_matrix, omega_matrix, omega_vector_from_intrinsics
 from ._camera import pixel_intrinsics as _pixel_intrinsics
 from ._distortion import distort, undistort
-from ._field import DistanceField, closest_parameter, setup, signed_distances
-from ._homology import homology_matrix, symmetry_feet, symmetry_residuals, transfer
+from ._field import DistanceField, checked_distances, closest_parameter, setup, signed_distances
+from ._homology import homology_matrix, symmetry_checked, symmetry_feet, symmetry_residuals, transfer
 from ._linear import focal_from_principal_point, linear_estimates
-from ._solvers import NULL_RCOND, Solved, is_stale, polish_traced, solvers, until_fresh_traced
+from ._solvers import NULL_RCOND, Solved, computed_as, is_stale, polish_traced, solvers, until_fresh_traced
 from .core._options import Options
 
 
@@ -281,6 +281,24 @@ def residuals(y, problem: BundleProblem, hints=None) -> Float[Array, " VN"]:
     return r.reshape(-1)
 
 
+def checked_residuals(y, problem: BundleProblem, hints=None):
+    """:func:`residuals` at the end of a solve that searched closest points near
+    ``hints`` (V, N), in one pass (:func:`sorjax._field.checked_distances`): ``(r, feet,
+    r_near)``, the whole-outline residuals (VN,), their closest-point parameters (V, N)
+    (:func:`foot_parameters`: the next solve's hints) and the residuals searched near
+    ``hints`` (None: ``r`` again)."""
+    if problem.n_dist:
+        x = distorted_transfer(y, problem)
+        d, t, d_near = jax.vmap(checked_distances, in_axes=(0, 0, None if hints is None else 0))(problem.fields, x,
+                                                                                                   hints)
+        w = problem.weights
+        return (d * w).reshape(-1), t, (d_near * w).reshape(-1)
+    v, l = pole_polar_pairs(y, problem)
+    r, t, r_near = jax.vmap(symmetry_checked, in_axes=(0, 0, 0, 0, 0, None if hints is None else 0))(
+        v, l, problem.samples, problem.fields, problem.weights, hints)
+    return r.reshape(-1), t, r_near.reshape(-1)
+
+
 def foot_parameters(y, problem: BundleProblem) -> Float[Array, "V N"]:
     """Per view and sample, the parameter of the outline's point closest to the
     transferred sample ``W_j x_ij`` (knot units; whole-outline search, no gradient;
@@ -316,10 +334,10 @@ _SOLVERS = solvers(rtol=1e-7, atol=1e-9)
 
 
 @functools.partial(jax.jit, static_argnames=("max_steps", "method"))
-def solve(y0, problem: BundleProblem, max_steps: int = 200, method: str = "lm"):
+def solve(y0, problem: BundleProblem, max_steps: int = 200, method: str = "lm", hints=None):
     """Minimise the bundle's cost from ``y0`` with ``method``: "lm" (Levenberg-Marquardt),
     "gn" (Gauss-Newton) or "screen" (loose Levenberg-Marquardt, for a few steps);
-    returns ``(y, result, steps, residuals, stale)``.
+    returns ``(y, result, steps, residuals, stale, feet)``.
 
     The solver's residuals search each closest point only near where it was at ``y0``
     (:func:`foot_parameters`; :data:`sorjax._field.NEAR_WINDOW`): a third of the
@@ -329,13 +347,17 @@ def solve(y0, problem: BundleProblem, max_steps: int = 200, method: str = "lm"):
     solve), and the caller then solves again from ``y`` (:func:`fit_bundle`).  Measured
     on the two-sphere scene (60 trials, f = 700 and 1400 px, sigma 0.5-2 px): the
     closest points moved at most 28 knots from the best seed to the optimum (median 3),
-    within the window of 32."""
-    hints = foot_parameters(y0, problem)
+    within the window of 32.
+
+    ``hints``: :func:`foot_parameters` at ``y0`` when the caller has them (the end of
+    the previous solve, ``feet``), else None (searched here).  ``feet``: the
+    closest-point parameters of the returned residuals (:func:`checked_residuals`)."""
+    if hints is None:
+        hints = foot_parameters(y0, problem)
     sol = optx.least_squares(_hinted_residuals, _SOLVERS[method], y0, args=(problem, hints), max_steps=max_steps,
                              throw=False)
-    r = residuals(sol.value, problem)
-    stale = is_stale(r, residuals(sol.value, problem, hints))
-    return sol.value, sol.result, sol.stats["num_steps"], r, stale
+    r, feet, r_near = checked_residuals(sol.value, problem, hints)
+    return sol.value, sol.result, sol.stats["num_steps"], r, is_stale(r, r_near), feet
 
 
 # The no-perspective reference: the focal length held at ORTHO_LOG_F (log of a focal
@@ -374,11 +396,12 @@ def _orthographic_fit(y, problem: BundleProblem, max_steps: int = 100):
     if k0.shape[0] == 3:  # known aspect, compact chart: pad it
         k0 = jnp.concatenate([k0[:1], k0])
 
-    def once(z):
-        z, cost, stale = _orthographic_solve(z, k0, problem, max_steps=max_steps)
-        return cost, z, 0, stale
+    def once(state):
+        z, cost, stale, feet = _orthographic_solve(*state, k0, problem, max_steps=max_steps)
+        return cost, (z, feet), 0, stale
 
-    cost, z, _ = until_fresh_traced(once, (k0[0] - k0[1], jnp.asarray(a0)))
+    z0 = (k0[0] - k0[1], jnp.asarray(a0))
+    cost, (z, _), _ = until_fresh_traced(once, (z0, foot_parameters(_orthographic_params(z0, k0, problem), problem)))
     return cost, z, k0
 
 
@@ -393,17 +416,16 @@ def _orthographic_params(z, k0, problem: BundleProblem):
 
 
 @functools.partial(jax.jit, static_argnames=("max_steps",))
-def _orthographic_solve(z0, k0, problem: BundleProblem, max_steps: int = 100):
-    """One solve of :func:`orthographic_cost` from ``z0``: ``(z, cost, stale)``."""
-    hints = foot_parameters(_orthographic_params(z0, k0, problem), problem)
+def _orthographic_solve(z0, hints, k0, problem: BundleProblem, max_steps: int = 100):
+    """One solve of :func:`orthographic_cost` from ``z0`` (``hints`` its closest-point
+    parameters): ``(z, cost, stale, feet)``, ``feet`` those at ``z``."""
 
     def res(z, hints):
         return residuals(_orthographic_params(z, k0, problem), problem, hints)
 
     sol = optx.least_squares(res, _ORTHO_SOLVER, z0, args=hints, max_steps=max_steps, throw=False)
-    r = residuals(_orthographic_params(sol.value, k0, problem), problem)
-    stale = is_stale(r, res(sol.value, hints))
-    return sol.value, jnp.sum(r**2), stale
+    r, feet, r_near = checked_residuals(_orthographic_params(sol.value, k0, problem), problem, hints)
+    return sol.value, jnp.sum(r**2), is_stale(r, r_near), feet
 
 
 @jax.jit
@@ -433,7 +455,7 @@ def pixel_params(k, problem: BundleProblem, T):
 
 
 @jax.jit
-def covariance(y, problem: BundleProblem, T):
+def covariance(y, problem: BundleProblem, T, feet=None):
     """Covariance of the pixel intrinsics ``(fu, fv, u0, v0)`` at ``y`` (followed by
     ``(k1[, k2])`` with distortion, :func:`pixel_params`); returns
     ``(cov, s2, step)`` with ``s2 = |r|^2 / (VN - p)`` (normalised units^2) and ``step``
@@ -448,9 +470,13 @@ def covariance(y, problem: BundleProblem, T):
     is not determined by the views at all (e.g. the focal length when every ``v_x`` is
     at infinity): the pixel intrinsics that move along it get an *infinite* variance
     (their covariances with the others NaN) -- a pseudo-inverse would silently give
-    them zero variance instead."""
+    them zero variance instead.
+
+    ``feet``: :func:`foot_parameters` at ``y`` when the caller has them (a solver's
+    end), else None (searched here)."""
     flat, unravel = jax.flatten_util.ravel_pytree(y)
-    feet = foot_parameters(y, problem)  # searched once; exact hints for J, r and the mirror pairs
+    if feet is None:
+        feet = foot_parameters(y, problem)  # searched once; exact hints for J, r and the mirror pairs
     J = jax.jacfwd(lambda f: residuals(unravel(f), problem, feet))(flat)
     r = residuals(y, problem, feet)
     nk = y[0].shape[0]
@@ -539,6 +565,16 @@ def make_problem(points_n, n_samples: int, aspect=None, inliers=None, used=None,
                          jnp.asarray(fixed, jnp.float64))
 
 
+def with_model(base: BundleProblem, aspect, fixed=None) -> BundleProblem:
+    """``base`` (:func:`make_problem` of some outlines, no aspect ratio, nothing fixed)
+    with the known aspect ratio ``aspect`` (NaN: free) and the chart values ``fixed``
+    (:func:`fixed_chart`; None: nothing fixed): one problem's fields, samples and
+    weights serve every model of a calibration."""
+    a = jnp.asarray(jnp.nan if aspect is None else aspect, jnp.float64)
+    return BundleProblem(base.fields, base.samples, base.weights, a, base.n_dist,
+                         None if fixed is None else jnp.asarray(fixed, jnp.float64))
+
+
 @functools.partial(jax.jit, static_argnames=("n_samples",))
 def _build_problem(pts, used, inliers, aspect, n_samples: int) -> BundleProblem:
     pts = jnp.where(used[:, None, None], pts, _placeholder_outline(pts.shape[1]))
@@ -616,13 +652,24 @@ def fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Optio
     a (V, 2))``, whether the polish converged (bool), every solver step taken (int),
     the (V N) residuals at ``y``.  Of the seeds tried, the one converged (else the one
     of lowest cost) is returned."""
+    return _fit_bundle(problem, l_seeds_n, seeds, seed_ok, options, jnp.eye(3))[:4]
+
+
+def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Options, T):
+    """:func:`fit_bundle`, and :func:`covariance`'s ``(cov, s2)`` (``T`` the normalising
+    similarity) at the ``y`` returned: every polished seed's covariance is computed in
+    the loop (its Gauss-Newton step is the stationarity test of :func:`_converged`), so
+    that the bundle's program holds one covariance, not two.  ``(cov, s2)`` is NaN when
+    no seed was tried (never: :func:`bundle_seeds` always gives one).  Returns ``(y,
+    ok, steps, residuals, (cov, s2))``."""
     max_steps = options.bundle_max_steps
     used = problem.used
     l = jnp.where(used[:, None], jnp.asarray(l_seeds_n, jnp.float64), jnp.asarray([1.0, 0.0, 0.0]))
     a0 = axis_params(l)
     seed_ok = jnp.asarray(seed_ok, bool)
     ks = pack_seeds(seeds, seed_ok)
-    costs = jax.vmap(lambda k: jnp.sum(residuals((k, a0), problem) ** 2))(ks)
+    r0, feet0, _ = jax.vmap(lambda k: checked_residuals((k, a0), problem))(ks)  # feet0: each seed's hints
+    costs = jnp.sum(r0**2, axis=1)
     costs = jnp.where(jnp.isfinite(costs), costs, jnp.inf)
     S = ks.shape[0]
     # the seeds to try first, by cost (ties: the first given); the others last
@@ -635,44 +682,57 @@ def fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Optio
         return (i < S) & ~done & seed_ok[order[jnp.minimum(i, S - 1)]]
 
     def body(c):
-        i, _, have, best_bad, best_cost, best_y, best_r, total = c
+        i, _, have, best_bad, best_cost, best_y, best_r, best_cov, total = c
         j = order[i]
-        final, steps = polish_traced(run, (ks[j], a0), costs[j])
-        y, ok, cost = _converged(final, problem)
+        final, steps = polish_traced(run, ((ks[j], a0), feet0[j]), costs[j])
+        (y_end, feet), final = final.y, final._replace(y=final.y[0])
+        cov, s2, step = covariance(y_end, problem, T, feet)
+        y, ok, cost = _converged(final, problem, step)
         better = ~have | (best_bad & ok) | ((best_bad == ~ok) & (cost < best_cost))
         pick = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(better, a, b), new, old)  # noqa: E731
         return (i + 1, ok, jnp.asarray(True), jnp.where(better, ~ok, best_bad), jnp.where(better, cost, best_cost),
-                pick(y, best_y), pick(final.out, best_r), total + steps)
+                pick(y, best_y), pick(final.out, best_r), pick((cov, s2), best_cov), total + steps)
 
+    n_cov = 4 + problem.n_dist
     init = (jnp.asarray(0, jnp.int32), jnp.asarray(False), jnp.asarray(False), jnp.asarray(True),
-            jnp.asarray(jnp.inf), (ks[order[0]], a0), jnp.full(n_res, jnp.nan), jnp.asarray(0, jnp.int32))
-    _, _, _, bad, _, y, r, total = jax.lax.while_loop(cond, body, init)
-    return y, ~bad, total, r
+            jnp.asarray(jnp.inf), (ks[order[0]], a0), jnp.full(n_res, jnp.nan),
+            (jnp.full((n_cov, n_cov), jnp.nan), jnp.asarray(jnp.nan)), jnp.asarray(0, jnp.int32))
+    _, _, _, bad, _, y, r, cov, total = jax.lax.while_loop(cond, body, init)
+    return y, ~bad, total, r, cov
 
 
 def _runner(problem: BundleProblem, max_steps: int):
-    """``run(y, method) -> Solved``: :func:`solve` from ``y``, repeated from its end
-    while stale (:func:`sorjax._solvers.until_fresh_traced`); what
-    :func:`sorjax._solvers.polish_traced` polishes with."""
+    """``run((y, hints), method) -> Solved``: :func:`solve` from ``y`` with the
+    closest-point parameters ``hints`` (:func:`foot_parameters` at ``y``), repeated
+    from its end while stale (:func:`sorjax._solvers.until_fresh_traced`); what
+    :func:`sorjax._solvers.polish_traced` polishes with.  The :class:`Solved`'s ``y``
+    is the pair ``(y, feet)`` at the end: every solve starts from the closest points
+    the previous one ended with (no search of its own)."""
 
-    def run(y, method):
-        def once(y):
-            y_end, res, n, r, stale = solve(y, problem, max_steps=max_steps, method=method)
-            return (res == optx.RESULTS.successful, r), y_end, n, stale
+    def run(state, method):
+        def once(state):
+            y_end, res, n, r, stale, feet = solve(state[0], problem, max_steps=max_steps, method=method,
+                                                  hints=state[1])
+            return (res == optx.RESULTS.successful, r), (y_end, feet), n, stale
 
-        (ok, r), y_end, steps = until_fresh_traced(once, y)
-        return Solved(y_end, ok, jnp.sum(r**2), steps, r)
+        (ok, r), state, steps = until_fresh_traced(once, state)
+        return Solved(state, ok, jnp.sum(r**2), steps, r)
 
     return run
 
 
-def _converged(final: Solved, problem: BundleProblem):
+def _converged(final: Solved, problem: BundleProblem, step=None):
     """``(y, ok, cost)`` of a polish: converged, or stopped by its step limit but as
-    good as stationary (:data:`STATIONARY_SIGMAS`), with a finite cost (else inf)."""
+    good as stationary (:data:`STATIONARY_SIGMAS`), with a finite cost (else inf).
+    ``step``: :func:`step_sigmas` at ``final.y`` when the caller has it (else computed
+    here, only where needed)."""
     y, cost = final.y, final.cost
     finite = jnp.isfinite(cost)
-    stationary = jax.lax.cond(~final.ok & finite, lambda: step_sigmas(y, problem) < STATIONARY_SIGMAS,
-                              lambda: jnp.asarray(False))
+    if step is None:
+        stationary = jax.lax.cond(~final.ok & finite, lambda: step_sigmas(y, problem) < STATIONARY_SIGMAS,
+                                  lambda: jnp.asarray(False))
+    else:
+        stationary = ~final.ok & finite & (step < STATIONARY_SIGMAS)
     ok = (final.ok | stationary) & finite
     return y, ok, jnp.where(finite, cost, jnp.inf)
 
@@ -769,7 +829,7 @@ def pin_params(k, problem: BundleProblem):
 
 @jax.jit
 def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options: Options = Options(),
-                    fixed=None) -> BundleOut:
+                    fixed=None, base=None) -> BundleOut:
     """The joint bundle, one pure function of arrays (jit, vmap over trials, grad:
     the optimum is differentiated implicitly, :func:`implicit_solution`).
 
@@ -788,33 +848,52 @@ def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, opt
             where free (OpenCV's fixed-parameter flags), or None (all free).  A fixed
             entry gets a variance of 0 in ``cov``; ``fu`` fixed needs a free aspect
             ratio (with a known one, fix ``fv``: ``fu = aspect fv``).
+        base: the :class:`BundleProblem` of ``points_n`` (:func:`make_problem` with
+            ``inliers`` and ``used``, no aspect ratio, nothing fixed), when the caller
+            has it (one per calibration, shared by every method), or None (built here).
 
     Returns a :class:`BundleOut`."""
     used = jnp.asarray(used, bool)
     T = jnp.asarray(T, jnp.float64)
-    problem = make_problem(points_n, options.n_samples, aspect, inliers, used,
-                           None if fixed is None else fixed_chart(fixed, T))
+    fixed_n = None if fixed is None else fixed_chart(fixed, T)
+    if base is None:
+        problem = make_problem(points_n, options.n_samples, aspect, inliers, used, fixed_n)
+    else:
+        problem = with_model(base, aspect, fixed_n)
     frozen = jax.lax.stop_gradient(problem)  # the solvers: no tangents into their loops
-    y, ok, steps, r = fit_bundle(frozen, jax.lax.stop_gradient(l_n), jax.lax.stop_gradient(seeds), seed_ok, options)
-    out, _ = _solved(y, problem, T, used, steps, ok)
+    y, ok, steps, r, cov = _fit_bundle(frozen, jax.lax.stop_gradient(l_n), jax.lax.stop_gradient(seeds), seed_ok,
+                                       options, jax.lax.stop_gradient(T))
+    out, _ = _solved(y, problem, T, used, steps, ok, given=(cov, r))
     y = out.y
-    _, z, _ = _orthographic_fit(jax.lax.stop_gradient(y), frozen)
+    cost_o, z, _ = _orthographic_fit(jax.lax.stop_gradient(y), frozen)
     # its cost at the fitted z (envelope theorem: z's own derivative does not enter)
-    cost_o = jnp.sum(residuals(_orthographic_params(z, y[0], problem), problem) ** 2)
+    cost_o = computed_as(cost_o, lambda k, p: jnp.sum(residuals(_orthographic_params(z, k, p), p) ** 2), y[0], problem)
     return eqx.tree_at(lambda b: b.evidence, out, cost_o / T[0, 0] ** 2 - out.cost)
 
 
-def _solved(y, problem: BundleProblem, T, used, steps, ok):
+def _solved(y, problem: BundleProblem, T, used, steps, ok, given=None):
     """A solver's end ``y`` as a :class:`BundleOut` (its ``evidence`` NaN, for the
     caller to fill) and the covariance of every intrinsic parameter (px; with
     distortion the coefficients follow): the fixed entries pinned, the optimum made
-    differentiable (:func:`implicit_solution`), the residuals in pixels."""
+    differentiable (:func:`implicit_solution`), the residuals in pixels.
+
+    ``given``: ``((cov, s2), r)``, :func:`covariance`'s ``(cov, s2)`` and the
+    whole-outline :func:`residuals` at ``y`` as the solver computed them (on
+    ``stop_gradient`` inputs: :func:`_fit_bundle`), or None (computed here).  Given, they
+    are made differentiable by :func:`sorjax._solvers.computed_as` instead of traced a
+    second time: the same values, half the compilation."""
     y = (pin_params(y[0], problem), y[1])
     y = implicit_solution(y, problem)
-    cov, s2, _ = covariance(y, problem, T)
+    if given is None:
+        cov, s2, _ = covariance(y, problem, T)
+        r = residuals(y, problem)
+    else:
+        (cov, s2), r = given
+        cov, s2 = computed_as((cov, s2), lambda y, p, T: covariance(y, p, T)[:2], y, problem, T)
+        r = computed_as(r, residuals, y, problem)
     K, omega, vx, ls = solution_in_pixels(y, problem, T)
     scale = 1.0 / T[0, 0]
-    rv = residuals(y, problem).reshape(used.shape[0], -1) * scale  # the solver's, differentiable
+    rv = r.reshape(used.shape[0], -1) * scale  # the solver's, differentiable
     nan = jnp.asarray(jnp.nan)
     out = BundleOut(
         y=y, K=K, omega=omega,
@@ -880,9 +959,9 @@ def fit_distorted(problem: BundleProblem, y_seeds, seed_ok, options: Options = O
         y0, good = args
 
         def polish():
-            cost0 = jnp.sum(residuals(y0, problem) ** 2)
-            final, steps = polish_traced(run, y0, cost0)
-            y, ok, cost = _converged(final, problem)
+            r0, feet0, _ = checked_residuals(y0, problem)
+            final, steps = polish_traced(run, (y0, feet0), jnp.sum(r0**2))
+            y, ok, cost = _converged(final._replace(y=final.y[0]), problem)
             return y, ok, cost, steps
 
         def skip():
@@ -995,13 +1074,14 @@ def distortion_gate(delta_px2, n, s_px, options: Options = Options(), z_min: flo
 
 
 @functools.partial(jax.jit, static_argnames=("n_samples",))
-def linearised_covariance(points_n, used, inliers, l_n, K, T, aspect, n_samples: int):
+def linearised_covariance(points_n, used, inliers, l_n, K, T, aspect, n_samples: int, base=None):
     """Covariance of ``(fu, fv, u0, v0)`` per px^2 of symmetry residual for an estimate
     ``K`` (px): :func:`covariance` at ``K`` with the per-view axes ``l_n`` (normalised)
     -- how well the used views determine the intrinsics whatever the estimator
-    (infinite where they don't).  Pure; arguments as :func:`bundle_estimate`'s."""
+    (infinite where they don't).  Pure; arguments as :func:`bundle_estimate`'s
+    (``base`` its shared problem, or None)."""
     used = jnp.asarray(used, bool)
-    problem = make_problem(points_n, n_samples, aspect, inliers, used)
+    problem = make_problem(points_n, n_samples, aspect, inliers, used) if base is None else with_model(base, aspect)
     Kn = T @ K
     k = pack_seeds(jnp.stack([Kn[0, 0], Kn[1, 1], Kn[0, 2], Kn[1, 2]])[None], jnp.ones(1, bool))[0]
     l = jnp.where(used[:, None], jnp.asarray(l_n, jnp.float64), jnp.asarray([1.0, 0.0, 0.0]))

@@ -194,6 +194,13 @@ def signed_distance(field: DistanceField, x: Float[Array, "2"], hint=None) -> Fl
     ``hint``: search the closest point only near this parameter
     (:func:`closest_parameter_near`); by default the whole outline is searched."""
     t = closest_parameter(field, x) if hint is None else closest_parameter_near(field, x, hint)
+    return signed_distance_at(field, x, t)
+
+
+def signed_distance_at(field: DistanceField, x: Float[Array, "2"], t) -> Float[Array, ""]:
+    """:func:`signed_distance` with the closest-point parameter ``t`` already searched
+    (:func:`closest_parameter` or :func:`closest_parameter_near`): one Newton step with
+    gradient from ``t``, then the distance along the normal there."""
     c, dc, ddc = curve(field, t)
     r = x - c
     h = jnp.maximum(dc @ dc - r @ ddc, 0.25 * (dc @ dc))
@@ -208,6 +215,28 @@ def signed_distances(field: DistanceField, x: Float[Array, "N 2"], hints=None) -
     if hints is None:
         return jax.vmap(signed_distance, in_axes=(None, 0))(field, x)
     return jax.vmap(signed_distance, in_axes=(None, 0, 0))(field, x, hints)
+
+
+def checked_distances(field: DistanceField, x: Float[Array, "N 2"], hints=None):
+    """What a solver that searched closest points near ``hints`` (N,) needs at its end,
+    in one pass: ``(d, t, d_near)``, the signed distances of the points ``x`` with the
+    whole outline searched (as :func:`signed_distances` without hints), their
+    closest-point parameters ``t`` (:func:`closest_parameter`: the hints of the next
+    solve) and the distances searched near ``hints`` (what the solver saw: the two
+    differ where a closest point left its window).  The two searches' Newton steps and
+    distances are one ``vmap``-ed evaluation: half the program of evaluating each.
+    ``hints`` None: ``d_near`` is ``d`` (only the whole outline searched)."""
+    fs, xs = jax.lax.stop_gradient(field), jax.lax.stop_gradient(x)
+
+    def one(x, xs, h):
+        k = [_nearest_knot(fs, xs)] + ([] if h is None else [_nearest_knot_near(fs, xs, h)])
+        t = jax.vmap(lambda k: _newton_foot(fs, xs, k))(jnp.stack(k).astype(jnp.float64))
+        d = jax.vmap(lambda t: signed_distance_at(field, x, t))(t)
+        return d[0], t[0], d[-1]
+
+    if hints is None:
+        return jax.vmap(lambda x, xs: one(x, xs, None))(x, xs)
+    return jax.vmap(one)(x, xs, jax.lax.stop_gradient(hints))
 
 
 CORNER_MIN_DEG = 1.5

@@ -52,7 +52,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from ._checks import boolean, check_sizes, integer, number
-from ._field import DistanceField, closest_parameter, signed_distances
+from ._field import DistanceField, checked_distances, closest_parameter, signed_distances
 from ._outline import DEFAULT_POINTS, make_outline, perimeter
 
 
@@ -157,6 +157,17 @@ def symmetry_residuals(
     (:func:`sorjax._field.closest_parameter_near`)."""
     r = signed_distances(field, transfer(homology_matrix(v, l), samples), hints)
     return r if weights is None else r * weights
+
+
+def symmetry_checked(v: Float[Array, "3"], l: Float[Array, "3"], samples: Float[Array, "N 2"], field: DistanceField,
+                     weights, hints=None):
+    """:func:`symmetry_residuals` at the end of a solve that searched closest points
+    near ``hints``: ``(r, t, r_near)``, the whole-outline residuals, their closest-point
+    parameters (:func:`symmetry_feet`: the next solve's hints) and the residuals
+    searched near ``hints`` (:func:`sorjax._field.checked_distances`: one pass; None:
+    ``r`` again, only the whole outline searched)."""
+    d, t, d_near = checked_distances(field, transfer(homology_matrix(v, l), samples), hints)
+    return d * weights, t, d_near * weights
 
 
 def symmetry_feet(v: Float[Array, "3"], l: Float[Array, "3"], samples: Float[Array, "N 2"],

@@ -137,3 +137,24 @@ def polish_traced(run: Callable[[Any, str], Solved], y0, cost0) -> tuple[Solved,
     final = jax.lax.cond(use_gn, lambda: gn, lambda: run(start, "lm"))
     steps = gn.steps + jnp.where(use_gn, 0, final.steps)
     return final, steps
+
+
+def computed_as(value, fn: Callable[..., Any], *args):
+    """``value``, already computed as ``fn(*args)`` (e.g. inside a solver's loop, on
+    ``stop_gradient`` inputs), made differentiable as ``fn(*args)``: its tangent is
+    ``jax.jvp(fn, args)``'s (``value``'s own tangent is ignored).  ``fn`` is traced
+    only when differentiated, so a program that is not differentiated holds one copy
+    of it, the one that computed ``value`` (half the compilation of tracing it again
+    to differentiate it).  ``fn`` must close over nothing differentiated: pass every
+    differentiable input in ``args``.  The caller guarantees ``value == fn(*args)``."""
+
+    @jax.custom_jvp
+    def given(value, *args):
+        return value
+
+    @given.defjvp
+    def _jvp(primals, tangents):
+        _, dout = jax.jvp(fn, primals[1:], tangents[1:])
+        return primals[0], dout
+
+    return given(value, *args)

@@ -73,6 +73,56 @@ def test_hinted_search_matches_the_whole_outline_search_near_its_hint():
     assert np.min(np.abs(far - whole)) > 1e-3  # a stale hint shows (the solvers test at 1e-9)
 
 
+def test_checked_distances_are_the_whole_and_the_near_search_in_one_pass():
+    """What a solver reads at its end (:func:`checked_distances`): the whole-outline
+    distances, their closest-point parameters and the distances searched near the
+    solve's hints, bit for bit as the three separate evaluations give them (also where
+    a hint is stale; to round-off: a program of its own), and the same gradient in
+    the points."""
+    from sorjax._field import checked_distances, closest_parameter
+
+    field = ellipse_field(n=2048)
+    m = field.n_knots
+    rng = np.random.default_rng(5)
+    t = rng.uniform(0, 2 * np.pi, 200)
+    r = rng.uniform(-5, 5, 200)
+    q = jnp.asarray(np.stack([CX + (A + r) * np.cos(t), CY + (B + r) * np.sin(t)], 1))
+    t_true = jax.vmap(closest_parameter, in_axes=(None, 0))(field, q)
+    hints = jnp.mod(t_true + jnp.where(jnp.arange(200) % 7 == 0, m / 2, 3.0), m)  # every 7th stale
+    d, feet, d_near = jax.jit(checked_distances)(field, q, hints)
+    np.testing.assert_allclose(np.asarray(d), np.asarray(jax.jit(signed_distances)(field, q)), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(feet), np.asarray(t_true), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(d_near), np.asarray(jax.jit(signed_distances)(field, q, hints)), rtol=0,
+                               atol=1e-12)
+    assert np.sum(np.abs(np.asarray(d_near) - np.asarray(d)) > 1e-9) == np.sum(np.arange(200) % 7 == 0)
+    d2, _, same = checked_distances(field, q)
+    np.testing.assert_array_equal(np.asarray(d2), np.asarray(same))
+    g = jax.grad(lambda x: jnp.sum(checked_distances(field, x, hints)[0] ** 2))(q)
+    g0 = jax.grad(lambda x: jnp.sum(signed_distances(field, x) ** 2))(q)
+    np.testing.assert_allclose(np.asarray(g), np.asarray(g0), rtol=0, atol=1e-12)
+
+
+def test_computed_as_has_the_value_given_and_the_derivative_of_its_function():
+    """:func:`sorjax._solvers.computed_as`: a value computed elsewhere (a solver's loop)
+    keeps its value and differentiates as the function that computes it (jvp, grad,
+    under jit); the function is not traced unless differentiated."""
+    from sorjax._solvers import computed_as
+
+    traced = []
+
+    def fn(a, b):
+        traced.append(1)
+        return jnp.sin(a) * b**2
+
+    a, b = jnp.asarray(0.3), jnp.asarray(1.7)
+    value = jnp.sin(0.3) * 1.7**2
+    assert float(jax.jit(lambda a, b: computed_as(value, fn, a, b))(a, b)) == float(value)
+    assert not traced
+    g = jax.jit(jax.grad(lambda a, b: computed_as(value, fn, a, b), argnums=(0, 1)))(a, b)
+    g0 = jax.grad(fn, argnums=(0, 1))(a, b)
+    np.testing.assert_allclose(np.asarray(g), np.asarray(g0), rtol=1e-14)
+
+
 def test_whole_outline_search_finds_the_closest_point_near_sharp_corners():
     """Near a sharp corner the knot nearest a point can lie nearer the next decimated
     knot than the best one: the search's last pass must reach it (with one decimation

@@ -21,8 +21,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from .._bundle import (DISTORTION_MODELS, bundle_estimate, bundle_estimate_distorted, bundle_seeds, distortion_gate,
-                       linearised_covariance)
+from .._bundle import (DISTORTION_MODELS, BundleProblem, bundle_estimate, bundle_estimate_distorted, bundle_seeds,
+                       distortion_gate, linearised_covariance, make_problem)
 from .._camera import intrinsics_matrix, transform_points
 from .._linear import linear_estimate
 from ._assess import (DUPLICATE, USED, assess, axes_intersection, outline_extent, outline_radius,
@@ -102,6 +102,7 @@ class _Common(NamedTuple):
     points_n: Array
     l_n: Array
     inliers: Array
+    problem: BundleProblem
 
 
 def _common(points, homs: ViewHomologies, valid, options: Options) -> _Common:
@@ -112,11 +113,15 @@ def _common(points, homs: ViewHomologies, valid, options: Options) -> _Common:
     used = drop == USED
     # the normalisation is a constant for differentiation (K in pixels does not depend on it)
     T = jax.lax.stop_gradient(joint_transform(points, used))
+    points_n = transform_points(T, points)
+    inliers = homs.inliers.astype(jnp.float64)
     return _Common(
         radius=radius, duplicate_of=dup, drop=drop, used=used, n_used=jnp.sum(used),
         all_inf=jnp.all(jnp.where(used, homs.at_infinity, True)), T=T, rms_u=jnp.where(used, homs.rms, jnp.nan),
-        points_n=transform_points(T, points), l_n=homs.l_s @ jnp.linalg.inv(T),  # lines map by T^-T
-        inliers=homs.inliers.astype(jnp.float64),
+        points_n=points_n, l_n=homs.l_s @ jnp.linalg.inv(T),  # lines map by T^-T
+        inliers=inliers,
+        # the joint fields, samples and weights: built once, shared by every method
+        problem=make_problem(points_n, options.n_samples, None, inliers, used),
     )
 
 
@@ -127,12 +132,13 @@ def _bundle(c: _Common, homs: ViewHomologies, aspect, options: Options, fixed=No
     (:func:`sorjax.core._checks.lens_release`, :func:`~sorjax.core._checks.fixed_release`;
     None without fixed intrinsics): ``(BundleOut, (S, delta_px2, n, lens, fixed))``."""
     seeds, seed_ok = bundle_seeds(homs.v_x, homs.l_s, c.used, c.T, aspect, fixed)
-    out = bundle_estimate(c.points_n, c.used, c.inliers, c.l_n, seeds, seed_ok, aspect, c.T, options, fixed)
+    out = bundle_estimate(c.points_n, c.used, c.inliers, c.l_n, seeds, seed_ok, aspect, c.T, options, fixed,
+                          base=c.problem)
     y = jax.lax.stop_gradient(out.y)
     args = (y, c.points_n, c.used, c.inliers, aspect, c.T, options)
     lens = lens_release(*args, fixed)
     held = None if fixed is None else fixed_release(*args, fixed)
-    return out, view_scores(*args, fixed) + (lens, held)
+    return out, view_scores(*args, fixed, base=c.problem) + (lens, held)
 
 
 def _distorted(c: _Common, homs: ViewHomologies, aspect, options: Options, distortion: str, fixed=None):
@@ -185,7 +191,7 @@ def _linear_aspect(method: str, aspect):
 def _linear_cov(c: _Common, K, a_m, options: Options):
     finite = jnp.all(jnp.isfinite(K))
     return linearised_covariance(c.points_n, c.used, c.inliers, c.l_n, jnp.where(finite, K, jnp.eye(3)), c.T, a_m,
-                                 options.n_samples)
+                                 options.n_samples, base=c.problem)
 
 
 def _check_fixed(fixed):

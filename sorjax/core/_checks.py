@@ -60,7 +60,7 @@ from jax.scipy.special import gammaincc
 from jaxtyping import Array, Bool, Float, Int
 
 from .._bundle import (BundleProblem, _correlated_meat, fixed_chart, foot_parameters, free_intrinsics, make_problem,
-                       n_params, pin_intrinsics, pixel_params, pole_polar_pairs, residuals)
+                       n_params, pin_intrinsics, pixel_params, pole_polar_pairs, residuals, with_model)
 from .._homology import symmetry_residuals
 from ._options import Options
 
@@ -157,16 +157,18 @@ def duplicate_views(points: Float[Array, "V M 2"], valid: Bool[Array, " V"], opt
     return jnp.where(jnp.any(same, axis=1), jnp.argmax(same, axis=1), -1).astype(jnp.int32)
 
 
-def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=None):
+def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=None, base=None):
     """Score statistics of releasing each view's homology from the pole-polar
     constraint at the bundle's optimum ``y`` (normalised by ``T``); see the module's
     docstring.  Returns ``(S (V,), delta_px2 (V,), n (V,))``: the statistics
     (dimensionless), one Gauss-Newton step's decrease of each view's cost (px^2) and
     each view's number of samples counted (sum of weights); NaN / 0 for views not
     used.  ``fixed`` (4,): intrinsics held fixed (px, NaN: free; None: none), which
-    the joint model then does not count among its parameters."""
-    problem = make_problem(points_n, options.n_samples, aspect, inliers, used,
-                           None if fixed is None else fixed_chart(fixed, T))
+    the joint model then does not count among its parameters.  ``base``: the
+    calibration's shared problem (:func:`sorjax._bundle.with_model`), or None (built)."""
+    fixed_n = None if fixed is None else fixed_chart(fixed, T)
+    problem = (make_problem(points_n, options.n_samples, aspect, inliers, used, fixed_n) if base is None
+               else with_model(base, aspect, fixed_n))
     feet = foot_parameters(y, problem)
     v, l = pole_polar_pairs(y, problem)
     V, N = problem.samples.shape[:2]

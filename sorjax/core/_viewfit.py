@@ -54,7 +54,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from .._field import DistanceField
-from .._homology import homology_matrix, symmetry_feet, symmetry_residuals, transfer
+from .._homology import homology_matrix, symmetry_checked, symmetry_feet, symmetry_residuals, transfer
 from .._solvers import Solved, is_stale, polish_traced, solvers, until_fresh_traced
 from ._options import Options
 from ._prepare import Views
@@ -164,6 +164,12 @@ def _pack(v, l):
     return p, v, _tangent_basis(v)
 
 
+def _barrier(v, l):
+    """The barrier residual ``100 relu(0.3 - |v.l| / |l|)`` (1,)."""
+    a = jnp.abs(v @ l) / jnp.linalg.norm(l)
+    return _BARRIER_GAIN * jax.nn.relu(_BARRIER_AT - a)[None]
+
+
 def _residuals(p, args):
     """Eq. 20's residuals plus one barrier residual ``100 relu(0.3 - |v.l| / |l|)``
     walling off the degenerate homologies with ``v`` on the axis (see
@@ -172,25 +178,29 @@ def _residuals(p, args):
     hints = args[5] if len(args) > 5 else None
     v, l = _unpack(p, v0, E)
     r = symmetry_residuals(v, l, samples, field, weights, hints)
-    a = jnp.abs(v @ l) / jnp.linalg.norm(l)
-    return jnp.concatenate([r, _BARRIER_GAIN * jax.nn.relu(_BARRIER_AT - a)[None]])
+    return jnp.concatenate([r, _barrier(v, l)])
 
 
-def refine(field: DistanceField, samples, weights, p0, v0, E, max_steps: int, method: str):
-    """Minimise eq. 20 from ``(p0, v0, E)`` with ``method`` ("lm", "gn", "screen").
-    Returns ``(v, l, cost, converged, steps, p, r, stale)``: ``r`` the whole-outline
-    residuals, ``stale`` whether they differ from the solver's hinted ones (always
-    ``False`` for "screen", whose runs are not repeated)."""
+def refine(field: DistanceField, samples, weights, p0, v0, E, max_steps: int, method: str, hints=None):
+    """Minimise eq. 20 from ``(p0, v0, E)`` with ``method`` ("lm", "gn", "screen"),
+    the closest points searched near ``hints`` (N,) (:func:`sorjax._homology.symmetry_feet`
+    at ``p0``; None: searched here).  Returns ``(v, l, cost, converged, steps, p, r,
+    stale, feet)``: ``r`` the whole-outline residuals, ``stale`` whether they differ
+    from the solver's hinted ones (always ``False`` for "screen", whose runs are not
+    repeated), ``feet`` their closest-point parameters (the hints of a solve from ``p``):
+    one pass, :func:`sorjax._homology.symmetry_checked`."""
     args = (field, samples, weights, v0, E)
-    hints = symmetry_feet(*_unpack(p0, v0, E), samples, field)
+    if hints is None:
+        hints = symmetry_feet(*_unpack(p0, v0, E), samples, field)
     sol = optx.least_squares(_residuals, _SOLVERS[method], p0, args=args + (hints,), max_steps=max_steps,
                              throw=False)
     v, l = _unpack(sol.value, v0, E)
-    r = _residuals(sol.value, args)
     # the screen's runs are not re-run: its staleness is not traced
-    stale = jnp.asarray(False) if method == "screen" else is_stale(r, _residuals(sol.value, args + (hints,)))
+    r, feet, r_near = symmetry_checked(v, l, samples, field, weights, None if method == "screen" else hints)
+    stale = jnp.asarray(False) if method == "screen" else is_stale(r, r_near)
+    cost = jnp.sum(r**2) + jnp.sum(_barrier(v, l) ** 2)
     ok = sol.result == optx.RESULTS.successful
-    return v, l, jnp.sum(r**2), ok, jnp.asarray(sol.stats["num_steps"], jnp.int32), sol.value, r[:-1], stale
+    return v, l, cost, ok, jnp.asarray(sol.stats["num_steps"], jnp.int32), sol.value, r, stale, feet
 
 
 class _Fit(eqx.Module):
@@ -200,6 +210,7 @@ class _Fit(eqx.Module):
     ok: Array
     steps: Array
     r: Array
+    feet: Array
 
 
 SCREEN_BLOCK = 4  # starts screened per block (one vmapped solve); blocks run while needed (a view has ~4 valid)
@@ -212,7 +223,9 @@ def _screen(field, samples, weights, vs, ls, valid, options: Options):
     stops after the last block holding a valid start: a view with few valid starts
     (every view but a nearly conic one) pays for one block, and under ``vmap`` a batch
     pays for the blocks its most demanding view needs.  Returns ``(costs, p, steps, v0,
-    E)`` in the compacted order, ``inf`` cost where invalid or non-finite."""
+    E, feet)`` in the compacted order, ``inf`` cost where invalid or non-finite;
+    ``feet`` (S', N) the closest-point parameters at each screened end (the polish's
+    hints)."""
     s = vs.shape[0]
     block = min(SCREEN_BLOCK, s)
     n_blocks = -(-s // block)
@@ -229,45 +242,48 @@ def _screen(field, samples, weights, vs, ls, valid, options: Options):
 
     def screen(p, v, e):
         out = refine(field, samples, weights, p, v, e, options.screen_steps, "screen")
-        return out[2], out[5], out[4]
+        return out[2], out[5], out[4], out[8]
 
     def cond(c):
         return c[0] * block < n_valid
 
     def body(c):
-        b, costs, ps, steps = c
+        b, costs, ps, steps, feet = c
         i = b * block
         sl = lambda a: jax.lax.dynamic_slice_in_dim(a, i, block)  # noqa: E731
-        cb, pb, nb = jax.vmap(screen)(sl(p0), sl(v0), sl(E))
+        cb, pb, nb, fb = jax.vmap(screen)(sl(p0), sl(v0), sl(E))
         up = lambda a, u: jax.lax.dynamic_update_slice_in_dim(a, u, i, 0)  # noqa: E731
-        return b + 1, up(costs, cb), up(ps, pb), up(steps, nb)
+        return b + 1, up(costs, cb), up(ps, pb), up(steps, nb), up(feet, fb)
 
     n = n_blocks * block
-    init = (jnp.asarray(0, jnp.int32), jnp.full(n, jnp.inf), p0, jnp.zeros(n, jnp.int32))
-    _, costs, ps, steps0 = jax.lax.while_loop(cond, body, init)
+    init = (jnp.asarray(0, jnp.int32), jnp.full(n, jnp.inf), p0, jnp.zeros(n, jnp.int32),
+            jnp.zeros((n, samples.shape[0])))
+    _, costs, ps, steps0, feet = jax.lax.while_loop(cond, body, init)
     costs = jnp.where(valid & jnp.isfinite(costs), costs, jnp.inf)
-    return costs, ps, steps0, v0, E
+    return costs, ps, steps0, v0, E, feet
 
 
-def _polish(field, samples, weights, p0, v0, E, cost0, options: Options) -> _Fit:
-    """Polish one start ``p0`` (chart ``v0, E``; its cost ``cost0``) with ``weights``:
-    Gauss-Newton, then Levenberg-Marquardt where that fails
-    (:func:`sorjax._solvers.polish_traced`), each solve re-run while its hints are stale
-    (:func:`sorjax._solvers.until_fresh_traced`).  The cost is ``nan`` where ``cost0``
-    is not finite (no start had a finite cost)."""
+def _polish(field, samples, weights, p0, v0, E, cost0, feet0, options: Options) -> _Fit:
+    """Polish one start ``p0`` (chart ``v0, E``; its cost ``cost0``, its closest-point
+    parameters ``feet0``) with ``weights``: Gauss-Newton, then Levenberg-Marquardt
+    where that fails (:func:`sorjax._solvers.polish_traced`), each solve re-run while
+    its hints are stale (:func:`sorjax._solvers.until_fresh_traced`); every solve
+    starts from the closest points its start's solve ended with (no search of its
+    own).  The cost is ``nan`` where ``cost0`` is not finite (no start had a finite
+    cost)."""
 
-    def run(p, method):
-        def once(p):
-            out = refine(field, samples, weights, p, v0, E, options.max_steps, method)
-            return out, out[5], out[4], out[7]
+    def run(state, method):
+        def once(state):
+            out = refine(field, samples, weights, state[0], v0, E, options.max_steps, method, state[1])
+            return out, (out[5], out[8]), out[4], out[7]
 
-        out, _, steps = until_fresh_traced(once, p)
-        return Solved(out[5], out[3], out[2], steps, out)
+        out, state, steps = until_fresh_traced(once, state)
+        return Solved(state, out[3], out[2], steps, out)
 
-    final, steps = polish_traced(run, p0, cost0)
+    final, steps = polish_traced(run, (p0, feet0), cost0)
     out = final.out
     cost = jnp.where(jnp.isfinite(cost0), out[2], jnp.nan)
-    return _Fit(out[0], out[1], cost, out[3], steps, out[6])
+    return _Fit(out[0], out[1], cost, out[3], steps, out[6], out[8])
 
 
 # ------------------------------------------------------------- starting points
@@ -426,11 +442,12 @@ def _outliers(r_px, active, keep, options: Options):
     return out & (nb > 0)
 
 
-def _infinity_z(field, samples, weights, v, l, cost):
+def _infinity_z(field, samples, weights, v, l, cost, feet):
     """``|v_3| / std(v_3)``: Gauss-Newton covariance ``s^2 (J^T J)^-1`` of eq. 20's
-    parameters in a chart centred on ``(v, l)``, ``s^2 = cost / (N - 4)``."""
+    parameters in a chart centred on ``(v, l)``, ``s^2 = cost / (N - 4)`` (``feet``:
+    the closest-point parameters at ``(v, l)``, searched near)."""
     p, v, E = _pack(v, l)
-    J = jax.jacfwd(_residuals)(p, (field, samples, weights, v, E))
+    J = jax.jacfwd(_residuals)(p, (field, samples, weights, v, E, feet))
     s2 = cost / jnp.maximum(jnp.sum(weights) - 4.0, 1.0)
     cov = s2 * jnp.linalg.pinv(J.T @ J, hermitian=True)
     var3 = E[2] @ cov[2:, 2:] @ E[2]
@@ -461,7 +478,7 @@ def fit_view(field: DistanceField, samples: Float[Array, "N 2"], weights: Float[
     else:
         vs, ls = (jnp.asarray(a, jnp.float64)[None] for a in init)
         valid = jnp.ones(1, bool)
-    costs, ps, steps0, v0, E = _screen(field, samples, weights, vs, ls, valid, options)
+    costs, ps, steps0, v0, E, feet = _screen(field, samples, weights, vs, ls, valid, options)
     k = jnp.argmin(costs)  # the first of equal costs
     n_all = jnp.sum(weights)
     active = weights > 0
@@ -488,16 +505,17 @@ def fit_view(field: DistanceField, samples: Float[Array, "N 2"], weights: Float[
         barrier = _BARRIER_GAIN * jax.nn.relu(_BARRIER_AT - jnp.abs(fit.v @ fit.l) / jnp.linalg.norm(fit.l))
         cost = jnp.sum((fit.r * trimmed) ** 2) + barrier**2
         cost_all = jnp.where(i == 0, fit.cost, cost_all)
-        return i + 1, (p, v, e, cost), fit, kept, trimmed, go, steps + fit.steps, cost_all
+        return i + 1, (p, v, e, cost, fit.feet), fit, kept, trimmed, go, steps + fit.steps, cost_all
 
     zero = jnp.zeros((), jnp.float64)
-    fit0 = _Fit(jnp.zeros(3), jnp.zeros(3), zero, jnp.asarray(False), jnp.asarray(0, jnp.int32), jnp.zeros(n))
+    fit0 = _Fit(jnp.zeros(3), jnp.zeros(3), zero, jnp.asarray(False), jnp.asarray(0, jnp.int32), jnp.zeros(n),
+                jnp.zeros(n))
     keep = jnp.ones(n, bool)
-    init_c = (jnp.asarray(0, jnp.int32), (ps[k], v0[k], E[k], costs[k]), fit0, keep, keep, jnp.asarray(True),
-              steps0[k], zero)
+    init_c = (jnp.asarray(0, jnp.int32), (ps[k], v0[k], E[k], costs[k], feet[k]), fit0, keep, keep,
+              jnp.asarray(True), steps0[k], zero)
     _, _, fit, keep, _, _, steps, cost_all = jax.lax.while_loop(cond, body, init_c)
     w = weights * keep
-    z = _infinity_z(field, samples, w, fit.v, fit.l, fit.cost)
+    z = _infinity_z(field, samples, w, fit.v, fit.l, fit.cost, fit.feet)
     l = fit.l / jnp.linalg.norm(fit.l[:2])
     return ViewFit(fit.v / jnp.linalg.norm(fit.v), l, fit.cost, jnp.sum(w), cost_all, n_all, fit.ok,
                    steps, keep, z, conic_rms)
