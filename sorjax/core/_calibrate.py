@@ -136,8 +136,8 @@ def _bundle(c: _Common, homs: ViewHomologies, aspect, options: Options, fixed=No
                           base=c.problem)
     y = jax.lax.stop_gradient(out.y)
     args = (y, c.points_n, c.used, c.inliers, aspect, c.T, options)
-    lens = lens_release(*args, fixed)
-    held = None if fixed is None else fixed_release(*args, fixed)
+    lens = lens_release(*args, fixed, base=c.problem)
+    held = None if fixed is None else fixed_release(*args, fixed, base=c.problem)
     return out, view_scores(*args, fixed, base=c.problem) + (lens, held)
 
 

@@ -325,26 +325,29 @@ def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, opt
                    rejected=rejected, beyond=beyond)
 
 
-def lens_release(y, points_n, used, inliers, aspect, T, options: Options, fixed=None) -> Release:
+def lens_release(y, points_n, used, inliers, aspect, T, options: Options, fixed=None, base=None) -> Release:
     """:func:`release_score` of the radial distortion ``k1`` that the pinhole bundle's
     solution ``y = (k (4,), a)`` holds at 0 (the model of
     :func:`sorjax._bundle.distorted_transfer` with one coefficient; ``fixed``: the
     intrinsics held fixed, px, or None); ``released[-1]`` is the ``k1`` one
-    Gauss-Newton step gives."""
-    base = make_problem(points_n, options.n_samples, aspect, inliers, used,
-                        None if fixed is None else fixed_chart(fixed, T))
-    problem = BundleProblem(base.fields, base.samples, base.weights, base.aspect, 1, base.fixed)
+    Gauss-Newton step gives.  ``base``: the calibration's problem
+    (:func:`sorjax._bundle.with_model`), or None to build it."""
+    fixed_n = None if fixed is None else fixed_chart(fixed, T)
+    pinhole = (make_problem(points_n, options.n_samples, aspect, inliers, used, fixed_n) if base is None
+               else with_model(base, aspect, fixed_n))
+    problem = BundleProblem(pinhole.fields, pinhole.samples, pinhole.weights, pinhole.aspect, 1, pinhole.fixed)
     k = jnp.concatenate([y[0], jnp.zeros(1)])
     return release_score((k, y[1]), problem, jnp.arange(5) == 4, T, options)
 
 
-def fixed_release(y, points_n, used, inliers, aspect, T, options: Options, fixed) -> Release:
+def fixed_release(y, points_n, used, inliers, aspect, T, options: Options, fixed, base=None) -> Release:
     """:func:`release_score` of the intrinsics ``fixed`` (4,) px (NaN: free) that the
     bundle's solution ``y = (k (4,), a)`` holds: released all at once (as many degrees
     of freedom as are fixed and estimable: ``fu`` with a known aspect ratio follows
-    ``fv``)."""
+    ``fv``); ``base`` as :func:`lens_release`'s."""
     chart = fixed_chart(fixed, T)
-    problem = make_problem(points_n, options.n_samples, aspect, inliers, used)
+    problem = (make_problem(points_n, options.n_samples, aspect, inliers, used) if base is None
+               else with_model(base, aspect))
     k = pin_intrinsics(y[0], chart)
     release = jnp.isfinite(chart) & free_intrinsics(aspect, None)
     return release_score((k, y[1]), problem, release, T, options)
