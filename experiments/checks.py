@@ -26,6 +26,7 @@ from sorjax import scenes
 from sorjax._calibration import code_name
 
 VERDICTS = ("ok", "widened", "contradicted")
+CULPRITS = ("", " (aspect)", " (views)", " (lens)", " (fixed)")
 
 
 def planar_leaf(K):
@@ -54,6 +55,18 @@ def cases():
     yield "3 views + a flat symmetric figure, outline_error=0", sq.K, list(sq.outlines) + [planar_leaf(sq.K)], dict(
         outline_error=0.0)
     yield "3 views + view 1 again", sq.K, list(sq.outlines) + [sq.outlines[1]], {}
+    # what the model holds (issue 18): lens distortion at k1 = 0, fixed intrinsics
+    for k1 in (-0.05, 0.05):
+        bd = scenes.random_sor_scene(1801, 4, distortion=(k1, 0.0))
+        yield f"lens k1 = {k1:+.2f}, distortion='none' (random SOR 1801)", bd.K, bd.outlines, {}
+        yield f"lens k1 = {k1:+.2f}, distortion='none', outline_error=0", bd.K, bd.outlines, dict(outline_error=0.0)
+        yield f"lens k1 = {k1:+.2f}, distortion='k1', outline_error=0", bd.K, bd.outlines, dict(
+            outline_error=0.0, distortion="k1")
+    cx, cy = sq.K[0, 2], sq.K[1, 2]
+    for off in (0.0, 3.0, 20.0):
+        yield (f"principal point fixed {off:g} px off", sq.K, sq.outlines, dict(principal_point=(cx + off, cy - off)))
+    yield ("principal point fixed 20 px off, outline_error=0", sq.K, sq.outlines,
+           dict(principal_point=(cx + 20, cy - 20), outline_error=0.0))
     for s in range(3):
         yield (f"np.round(noisy outline) sigma 0.5, seed {100 + s}", sq.K,
                [np.round(scenes.paper_noise(o, 0.5, 100 + s + 10 * i)[::8]) for i, o in enumerate(sq.outlines)], {})
@@ -66,8 +79,8 @@ def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--repeats", type=int, default=5, help="warm calibrations timed per model (default 5)")
     args = p.parse_args(argv)
-    print(f"{'case':52s} {'result':22s} {'fv +- std (px)':>18s} {'err %f':>7s} {'err/std':>7s} "
-          f"{'checks':>12s} {'confident wrong':>15s}")
+    print(f"{'case':56s} {'result':22s} {'fv +- std (px)':>18s} {'err %f':>7s} {'err/std':>7s} "
+          f"{'checks':>22s} {'confident wrong':>15s}")
     for name, K, outs, kw in cases():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -76,9 +89,9 @@ def main(argv=None):
         z = np.abs(e) / np.asarray(cal.std)
         zmax = float(np.nanmax(z)) if np.any(np.isfinite(z)) else float("nan")
         wrong = cal.success and zmax > 3
-        print(f"{name:52s} {code_name(cal.result):22s} {cal.fv:9.1f} +- {cal.std[1]:<6.3g} "
+        print(f"{name:56s} {code_name(cal.result):22s} {cal.fv:9.1f} +- {cal.std[1]:<6.3g} "
               f"{100 * np.nanmax(np.abs(e)) / K[1, 1] if np.any(np.isfinite(e)) else float('nan'):7.2f} "
-              f"{zmax:7.2f} {VERDICTS[int(cal.checks.verdict)]:>12s} {'YES' if wrong else 'no':>15s}")
+              f"{zmax:7.2f} {VERDICTS[int(cal.checks.verdict)] + CULPRITS[int(cal.checks.culprit)]:>22s} {'YES' if wrong else 'no':>15s}")
     sc = scenes.two_spheres(f=700.0)
     outs = [scenes.paper_noise(o, 1.0, 7 + i) for i, o in enumerate(sc.outlines)]
     homs = tuple(sorjax.fit_homology(o) for o in outs)

@@ -550,13 +550,6 @@ def _views_text(ch) -> str:
             + _worst_views(ch))
 
 
-def _released(p, px) -> bool:
-    """Whether a release test (:func:`sorjax.core._checks.release_score`) rejected the
-    held values: ``p < consistency_p`` with evidence above ``check_floor_px``."""
-    o = Options()
-    return bool(np.isfinite(float(p)) and float(p) < o.consistency_p and float(px) >= o.check_floor_px)
-
-
 def _lens_text(ch) -> str:
     return (f"the outlines show radial lens distortion, which the pinhole model (distortion='none') holds at zero: "
             f"with k1 released they fit {float(ch.lens_px):.2g} px RMS better (score test p = "
@@ -604,12 +597,12 @@ def model_notes(r, outline_error: float, fixed=None) -> list[str]:
             _aspect_text(ch) + f", within what the outline error allowed for ({float(outline_error):g} px) could "
             "cause. The standard deviations include the difference between the fixed and the free estimates; "
             "if the aspect ratio is not known exactly, pass aspect_ratio=None.")
-    if _released(ch.lens_p, ch.lens_px):
+    if bool(ch.lens_rejected):
         notes.append(
             _lens_text(ch) + f", within what the outline error allowed for ({float(outline_error):g} px) could cause. "
             "The standard deviations include the shift of K that this step makes. Calibrate with distortion='k1' "
             "(command line: --distortion k1) to estimate the distortion with K.")
-    if _released(ch.fixed_p, ch.fixed_px):
+    if bool(ch.fixed_rejected):
         notes.append(
             _fixed_text(ch, fixed) + f", within what the outline error allowed for ({float(outline_error):g} px) "
             "could cause. The standard deviations include that shift; if these values are not known exactly, "

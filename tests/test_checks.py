@@ -13,7 +13,7 @@ import pytest
 import sorjax
 from sorjax import scenes
 from sorjax._outline import BINARY_MASK_PX, QUANTISED_PX, STAIRCASE_PX, implied_outline_error
-from sorjax.core._checks import MODEL_CONTRADICTED, MODEL_OK, MODEL_WIDENED
+from sorjax.core._checks import CULPRIT_FIXED, CULPRIT_LENS, CULPRIT_VIEWS, MODEL_CONTRADICTED, MODEL_OK, MODEL_WIDENED
 
 
 def errors(cal, K):
@@ -106,6 +106,9 @@ def test_flat_symmetric_object_among_real_views(square):
     assert int(cal.checks.verdict) != MODEL_OK
     S = np.asarray(cal.checks.view_score)
     assert np.argmax(S) == 3  # the flat figure disagrees most
+    # k1 released absorbs much of it too (p 7e-15), but the views' test is the more
+    # significant (p 1e-19): the views are blamed, not the lens
+    assert int(cal.checks.culprit) == CULPRIT_VIEWS and not bool(cal.checks.lens_rejected)
 
 
 def test_duplicated_view_is_dropped(square):
@@ -162,6 +165,7 @@ def test_lens_distortion_widens_within_the_outline_error(barrel):
     assert not_confidently_wrong(cal, barrel.K)
     assert float(cal.checks.lens_k1) == pytest.approx(-0.05, abs=0.02)  # one Gauss-Newton step
     assert float(cal.checks.lens_p) < 1e-10
+    assert int(cal.checks.culprit) == CULPRIT_LENS and bool(cal.checks.lens_rejected)
 
 
 def test_lens_distortion_beyond_the_outline_error_is_refused(barrel):
@@ -190,3 +194,4 @@ def test_fixed_principal_point_is_checked(square):
     cal = sorjax.calibrate(square.outlines, principal_point=off, outline_error=0.0)
     assert cal.result == sorjax.RESULTS.inconsistent, cal.message
     assert "fixed intrinsics (u0 = 340, v0 = 220 px)" in cal.message
+    assert int(cal.checks.culprit) == CULPRIT_FIXED

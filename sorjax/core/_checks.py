@@ -90,7 +90,12 @@ class ModelChecks(eqx.Module):
             it at 0 (one Gauss-Newton step of the released model; NaN: not checked,
             e.g. distortion estimated); ``lens_p`` the score test's p-value (chi-square,
             1 degree of freedom), ``lens_px`` its evidence (px RMS per sample).
+        lens_rejected: the lens test rejected ``k1 = 0`` and is to blame (more
+            significant than the views' test, which rejects too when one view is no
+            surface of revolution): the covariance was widened by its shift, or the
+            calibration refused.
         fixed_p, fixed_px: the same for the intrinsics held fixed (NaN: none fixed);
+        fixed_rejected: as ``lens_rejected``, for the fixed intrinsics;
         fixed_shift: (4,) where releasing them moves ``(fu, fv, u0, v0)`` (px, one
             Gauss-Newton step; NaN: none fixed).
         inflation: the factor the covariance was scaled by (1: none).
@@ -115,9 +120,11 @@ class ModelChecks(eqx.Module):
     lens_k1: Float[Array, ""]
     lens_p: Float[Array, ""]
     lens_px: Float[Array, ""]
+    lens_rejected: Bool[Array, ""]
     fixed_p: Float[Array, ""]
     fixed_px: Float[Array, ""]
     fixed_shift: Float[Array, "4"]
+    fixed_rejected: Bool[Array, ""]
     inflation: Float[Array, ""]
     verdict: Int[Array, ""]
     culprit: Int[Array, ""]
