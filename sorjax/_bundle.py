@@ -454,6 +454,26 @@ def pixel_params(k, problem: BundleProblem, T):
     return p if d is None else jnp.concatenate([p, d])
 
 
+def residual_jacobian(y, problem: BundleProblem, feet=None):
+    """``(J, r, feet)`` at ``y``: the Jacobian of the stacked residuals
+    (:func:`residuals`) with respect to ``y`` flattened (``k`` first, then each view's
+    ``(theta, rho)``), the residuals (normalised units) and the closest-point
+    parameters they read (:func:`foot_parameters`; searched once here unless given),
+    held fixed as hints for both."""
+    flat, unravel = jax.flatten_util.ravel_pytree(y)
+    if feet is None:
+        feet = foot_parameters(y, problem)  # searched once; exact hints for J, r and the mirror pairs
+    J = jax.jacfwd(lambda f: residuals(unravel(f), problem, feet))(flat)
+    return J, residuals(y, problem, feet), feet
+
+
+def project_out(A, B):
+    """``A - B (B^T B)^+ B^T A``: the columns of ``A`` with the span of ``B``'s columns
+    projected out (the information on ``A``'s parameters once ``B``'s are fitted is
+    ``G^T G`` of the result, a Schur complement)."""
+    return A - B @ (jnp.linalg.pinv(B.T @ B, hermitian=True) @ (B.T @ A))
+
+
 @jax.jit
 def covariance(y, problem: BundleProblem, T, feet=None):
     """Covariance of the pixel intrinsics ``(fu, fv, u0, v0)`` at ``y`` (followed by
@@ -474,17 +494,13 @@ def covariance(y, problem: BundleProblem, T, feet=None):
 
     ``feet``: :func:`foot_parameters` at ``y`` when the caller has them (a solver's
     end), else None (searched here)."""
-    flat, unravel = jax.flatten_util.ravel_pytree(y)
-    if feet is None:
-        feet = foot_parameters(y, problem)  # searched once; exact hints for J, r and the mirror pairs
-    J = jax.jacfwd(lambda f: residuals(unravel(f), problem, feet))(flat)
-    r = residuals(y, problem, feet)
+    J, r, feet = residual_jacobian(y, problem, feet)
     nk = y[0].shape[0]
     dof = jnp.maximum(jnp.sum(problem.weights) - n_params(y, problem), 1)
     s2 = jnp.sum(r**2) / dof
     Jk, Ja = J[:, :nk], J[:, nk:]
     # the intrinsics' columns with the per-view parameters' directions projected out
-    G = Jk - Ja @ (jnp.linalg.pinv(Ja.T @ Ja, hermitian=True) @ (Ja.T @ Jk))
+    G = project_out(Jk, Ja)
     F = G.T @ G  # = the Schur complement J_k^T J_k - J_k^T J_a (J_a^T J_a)^-1 J_a^T J_k
     lam, U = jnp.linalg.eigh(0.5 * (F + F.T))
     null = lam <= NULL_EIGENVALUE * jnp.max(jnp.abs(lam))

@@ -27,7 +27,7 @@ from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
 from ._outline import BINARY_MASK_PX, DEFAULT_POINTS, PIXEL_TRACE_NOTE, as_outlines, implied_outline_error
 from .core._assess import (ASYMMETRIC, COLLAPSED_FOCAL, CONIC, DUPLICATE, MASKED, PP_OUTSIDE, TRIMMED, USED, WIDE_FOV,
                            outline_radius, view_verdicts)
-from .core._checks import CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, CULPRIT_VIEWS, MODEL_CONTRADICTED, MODEL_WIDENED, ModelChecks
+from .core._checks import CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, MODEL_WIDENED, ModelChecks
 from .core._calibrate import calibrate_homologies, calibrate_methods
 from .core._options import Options
 from .core._result import RESULTS

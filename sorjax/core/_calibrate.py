@@ -19,7 +19,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Float
 
 from .._bundle import (DISTORTION_MODELS, BundleProblem, bundle_estimate, bundle_estimate_distorted, bundle_seeds,
                        distortion_gate, linearised_covariance, make_problem)

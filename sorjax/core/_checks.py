@@ -54,13 +54,13 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax
-import jax.flatten_util
 import jax.numpy as jnp
 from jax.scipy.special import gammaincc
 from jaxtyping import Array, Bool, Float, Int
 
 from .._bundle import (BundleProblem, _correlated_meat, fixed_chart, foot_parameters, free_intrinsics, make_problem,
-                       n_params, pin_intrinsics, pixel_params, pole_polar_pairs, residuals, with_model)
+                       n_params, pin_intrinsics, pixel_params, pole_polar_pairs, project_out, residual_jacobian,
+                       with_model)
 from .._homology import symmetry_residuals
 from ._options import Options
 
@@ -305,15 +305,12 @@ def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, opt
     of ``Var(g)`` (:func:`sorjax._bundle._correlated_meat`), ``p = P(chi2_q > S)``;
     the Gauss-Newton step of the released model ``-(J^T J)^+ J^T r`` gives ``shift``
     and ``released``.  No solve: one Jacobian."""
-    flat, unravel = jax.flatten_util.ravel_pytree(y)
     nk = y[0].shape[0]
-    feet = foot_parameters(y, problem)
-    J = jax.jacfwd(lambda f: residuals(unravel(f), problem, feet))(flat)
-    r = residuals(y, problem, feet)
-    rel = jnp.concatenate([jnp.asarray(release, bool), jnp.zeros(flat.shape[0] - nk, bool)])
+    J, r, feet = residual_jacobian(y, problem)
+    rel = jnp.concatenate([jnp.asarray(release, bool), jnp.zeros(J.shape[1] - nk, bool)])
     Jr = jnp.where(rel[None, :], J, 0.0)
     Jh = jnp.where(rel[None, :], 0.0, J)
-    G = Jr - Jh @ (jnp.linalg.pinv(Jh.T @ Jh, hermitian=True) @ (Jh.T @ Jr))
+    G = project_out(Jr, Jh)
     q = jnp.sum(rel).astype(jnp.int32)
     n = jnp.sum(problem.weights)
     s2 = jnp.sum(r**2) / jnp.maximum(n - (n_params(y, problem) - q), 1.0)
