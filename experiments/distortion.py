@@ -31,6 +31,7 @@ Tables:
 
     python experiments/distortion.py            # 8 scenes, 3 noise draws each
     python experiments/distortion.py --quick    # 2 scenes, 1 noise draw
+    python experiments/distortion.py --draws 0  # the noise-free table alone
 """
 
 from __future__ import annotations
@@ -123,7 +124,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="2 scenes, 1 noise draw each (a few minutes)")
     ap.add_argument("--scenes", type=int, default=8)
-    ap.add_argument("--draws", type=int, default=3, help="noise draws per scene and sigma")
+    ap.add_argument("--draws", type=int, default=3, help="noise draws per scene and sigma (0: the noise-free table alone)")
     ap.add_argument("--seed", type=int, default=1800, help="first scene seed")
     ap.add_argument("--save", help="write every trial's numbers to this JSON file")
     args = ap.parse_args()
@@ -158,6 +159,9 @@ def main():
               f"{max(abs(x['k1_err']) for x in ok):14.1e} | {np.median([x['f_free'] for x in r]):+8.2f}, "
               f"{max((x['f_free'] for x in r), key=abs):+8.2f} | {sum(x['drops'] for x in r)}")
 
+    if not draws:  # --draws 0: the noise-free table alone
+        print(f"\n{time.time() - t0:.0f} s")
+        return
     print(f"\npaper noise (unit aspect known); focal errors in % of f; a trial is gross when |f err| > {GROSS:g} %")
     print("(RMS and bias over the trials that are not gross; 'bound': the median linearised std of f the bundle "
           "with k1 reports, the extended model's efficiency bound to first order; 'err/std': median |f err| / std)")

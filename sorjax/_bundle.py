@@ -938,12 +938,19 @@ def distorted_seeds(y_free, l_n, used, seeds, seed_ok, n_dist: int):
     """The seeds of the bundle with distortion: the distortion-free solution
     ``y_free = (k (4,), a (V, 2))`` with zero distortion, then every intrinsic seed
     ``seeds`` (S, 4) (normalised ``(fu, fv, u0, v0)``, :func:`bundle_seeds`) with the
-    per-view fits' axes ``l_n`` and ``k1`` in :data:`K1_SEEDS` (``k2 = 0``).
+    per-view fits' axes ``l_n`` and ``k1`` in :data:`K1_SEEDS` (``k2 = 0``).  The
+    fallback spread of :func:`bundle_seeds` (its last ``len(FALLBACK_FOCALS)`` rows) is
+    tried here even where a linear seed exists: the linear methods read distorted
+    outlines as a pinhole's, and a strong distortion sends all of them to a wrong
+    focal length (measured: k1 = -0.3, f = 527 px, every linear seed at 5x the true
+    f, each polish in the f -> infinity basin, where k1 has no effect; from the spread
+    with k1 = 0 or -0.25 the polish reaches the truth).
 
     Returns ``((k (P, 4 + n), a (P, V, 2)), ok (P,))``, ``P = 1 + S len(K1_SEEDS)``."""
     k0, a0 = y_free
     l = jnp.where(used[:, None], jnp.asarray(l_n, jnp.float64), jnp.asarray([1.0, 0.0, 0.0]))
     al = axis_params(l)
+    seed_ok = jnp.asarray(seed_ok, bool).at[-len(FALLBACK_FOCALS):].set(True)
     ks = pack_seeds(seeds, seed_ok)
     z = jnp.zeros(n_dist - 1)
     kk = [jnp.concatenate([k0, jnp.zeros(n_dist)])[None]]
@@ -958,39 +965,65 @@ def distorted_seeds(y_free, l_n, used, seeds, seed_ok, n_dist: int):
 
 
 def fit_distorted(problem: BundleProblem, y_seeds, seed_ok, options: Options = Options()):
-    """The bundle with distortion (``problem.n_dist = n > 0``) polished from every seed
-    ``y_seeds = (k (P, 4 + n), a (P, V, 2))`` that is ``seed_ok`` (:func:`distorted_seeds`):
-    Gauss-Newton, Levenberg-Marquardt as the fallback
-    (:func:`sorjax._solvers.polish_traced`), each solve repeated while stale, accepted
-    at its step limit when as good as stationary (as :func:`fit_bundle`); of the
-    polished seeds the converged one of lowest cost (else the lowest) is kept.  Every
-    seed is polished, not only the best at the start: a wrong basin (f -> infinity,
-    where k1 has no effect) is as good as stationary at once.  Pure (the seeds one
-    after another, ``lax.map``).
+    """The bundle with distortion (``problem.n_dist = n > 0``) from the seeds ``y_seeds =
+    (k (P, 4 + n), a (P, V, 2))`` that are ``seed_ok`` (:func:`distorted_seeds`): each
+    seed screened by ``options.distortion_screen_steps`` loose Levenberg-Marquardt steps
+    (``lax.map``), then polished from its screened end in the order of the screened
+    costs (Gauss-Newton, Levenberg-Marquardt as the fallback,
+    :func:`sorjax._solvers.polish_traced`, each solve repeated while stale, accepted at
+    its step limit when as good as stationary, as :func:`fit_bundle`) until one
+    converges (``lax.while_loop``).  Ranking by the cost at the seeds themselves is not
+    enough: a wrong basin (f -> infinity, where k1 has no effect) is as good as
+    stationary at once, while the right one's seeds need a few steps to show their
+    lower cost.  Pure.
 
-    Returns ``(y, ok, steps)``: ``y = (k (4 + n,), a (V, 2))``, steps of all polishes."""
+    Returns ``(y, ok, steps)``: ``y = (k (4 + n,), a (V, 2))`` the converged polish (else
+    the one of lowest cost), steps of every screen and polish."""
     run = _runner(problem, options.bundle_max_steps)
+    seed_ok = jnp.asarray(seed_ok, bool)
 
-    def one(args):
+    def screened(y0):
+        r0, feet0, _ = checked_residuals(y0, problem)
+        y, _, n, r, _, feet = solve(y0, problem, max_steps=options.distortion_screen_steps, method="screen",
+                                    hints=feet0)
+        cost, cost0 = jnp.sum(r**2), jnp.sum(r0**2)
+        better = jnp.isfinite(cost) & (cost <= cost0)  # (a screen that made things worse: its seed)
+        y, feet = jax.tree_util.tree_map(lambda a, b: jnp.where(better, a, b), (y, feet), (y0, feet0))
+        cost = jnp.where(better, cost, cost0)
+        return (y, feet), jnp.where(jnp.isfinite(cost), cost, jnp.inf), jnp.asarray(n, jnp.int32)
+
+    first = jax.tree_util.tree_map(lambda x: x[0], y_seeds)
+    shapes = jax.eval_shape(screened, first)
+
+    def screen(args):
         y0, good = args
+        skip = lambda: jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)  # noqa: E731
+        out = jax.lax.cond(good, lambda: screened(y0), skip)
+        return out[0], jnp.where(good, out[1], jnp.inf), out[2]
 
-        def polish():
-            r0, feet0, _ = checked_residuals(y0, problem)
-            final, steps = polish_traced(run, (y0, feet0), jnp.sum(r0**2))
-            y, ok, cost = _converged(final._replace(y=final.y[0]), problem)
-            return y, ok, cost, steps
+    starts, costs, screen_steps = jax.lax.map(screen, (y_seeds, seed_ok))
+    P = costs.shape[0]
+    order = jnp.lexsort((jnp.arange(P), costs, ~seed_ok))  # the screened costs, lowest first; ties: the first
 
-        def skip():
-            return y0, jnp.asarray(False), jnp.asarray(jnp.inf), jnp.asarray(0, jnp.int32)
+    def cond(c):
+        i, done = c[0], c[1]
+        return (i < P) & ~done & seed_ok[order[jnp.minimum(i, P - 1)]]
 
-        return jax.lax.cond(good, polish, skip)
+    def body(c):
+        i, _, have, best_bad, best_cost, best_y, total = c
+        j = order[i]
+        final, steps = polish_traced(run, jax.tree_util.tree_map(lambda x: x[j], starts), costs[j])
+        y, ok, cost = _converged(final._replace(y=final.y[0]), problem)
+        better = ~have | (best_bad & ok) | ((best_bad == ~ok) & (cost < best_cost))
+        pick = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(better, a, b), new, old)  # noqa: E731
+        return (i + 1, ok, jnp.asarray(True), jnp.where(better, ~ok, best_bad), jnp.where(better, cost, best_cost),
+                pick(y, best_y), total + steps)
 
-    ys, oks, costs, steps = jax.lax.map(one, (y_seeds, jnp.asarray(seed_ok, bool)))
-    P = oks.shape[0]
-    # converged first, then by cost (ties: the first seed)
-    best = jnp.lexsort((jnp.arange(P), costs, ~oks))[0]
-    y = jax.tree_util.tree_map(lambda x: x[best], ys)
-    return y, oks[best], jnp.sum(steps)
+    init = (jnp.asarray(0, jnp.int32), jnp.asarray(False), jnp.asarray(False), jnp.asarray(True),
+            jnp.asarray(jnp.inf), jax.tree_util.tree_map(lambda x: x[order[0]], starts[0]),
+            jnp.sum(screen_steps))
+    _, _, _, bad, _, y, total = jax.lax.while_loop(cond, body, init)
+    return y, ~bad, total
 
 
 class DistortedBundleOut(eqx.Module):
@@ -1013,8 +1046,13 @@ class DistortedBundleOut(eqx.Module):
             the intrinsics' block, px in the cross terms, none in ``k``'s).
         free: the :class:`BundleOut` of the distortion-free bundle (the seed).
         delta: ``free.cost - fit.cost`` (px^2): how much the distortion model lowers
-            the cost, the evidence for distortion (:func:`distortion_gate`).
-        ok: both fits converged and the estimate is finite (bool).
+            the cost, the evidence for distortion (:func:`distortion_gate`).  When the
+            distortion-free bundle did not converge (a strong distortion sends it
+            towards f -> infinity) its cost is taken as the lower of where it stopped
+            and the cost of the best camera with no perspective (that limit).
+        ok: the fit with distortion converged and its estimate is finite (bool); the
+            distortion-free fit's own ``free.ok`` may be False (then the calibration
+            can only use the fit with distortion, when its gate passes).
     """
 
     fit: BundleOut
@@ -1064,8 +1102,13 @@ def bundle_estimate_distorted(points_n, used, inliers, l_n, seeds, seed_ok, aspe
     ok = fit.ok & jnp.all(jnp.isfinite(y[0]))
     fit = eqx.tree_at(lambda b: (b.ok, b.evidence), fit, (ok, free.evidence + free.cost - cost))
     k = split_params(y[0], problem)[1]
+    # The distortion-free model's cost: its bundle's, or, when that did not converge (a
+    # strong distortion sends it towards f -> infinity, the camera with no
+    # perspective), the lower of where it stopped and that limit's cost (fmin: a NaN
+    # evidence leaves the stopping cost), so that delta never overstates the evidence.
+    ref = jnp.where(free.ok, free.cost, jnp.fmin(free.cost, free.cost + free.evidence))
     return DistortedBundleOut(fit=fit, k=k, k_std=jnp.sqrt(jnp.diagonal(cov)[4:]), cov=cov, free=free,
-                              delta=free.cost - cost, ok=ok & free.ok)
+                              delta=ref - cost, ok=ok)
 
 
 def distortion_gate(delta_px2, n, s_px, options: Options = Options(), z_min: float = 3.0, factor: float = 3.0):
