@@ -960,7 +960,13 @@ def calibrate(
             photographs; a sequence of one number per outline (px; NaN: none): as
             "measured", with each view's residual raised to that outline's own error
             estimate (what an extractor reports; with "measured", outline arrays that
-            carry an ``outline_error`` attribute give it themselves).  Outlines on a
+            carry an ``outline_error`` attribute give it themselves).  With either, the
+            estimate is also checked by leaving out each view in turn
+            (:func:`jackknife`): the spread widens the standard deviations, and an
+            intrinsic counts as determined only when its widened std is at most
+            ``Options.measured_undetermined`` (1/60) of the focal length, so that an
+            outline that is wrong without looking it (a symmetric piece of clutter
+            taken for an object) cannot make a confident wrong K.  Outlines on a
             pixel grid raise it further (whole-pixel coordinates, staircases; a pixel
             trace as ``cv2.findContours`` gives is replaced by its binary mask's
             outline, :func:`sorjax.make_outline`, and counts as accurate as that).
