@@ -23,8 +23,10 @@ extraction sorjax has.  Printed per column:
 * outline error: RMS distance (px) of a found outline's points to the exact silhouette;
   the median over found unoccluded objects and the fraction within 1 px;
 * calibration of each camera: ``sorjax.calibrate`` (defaults: bundle, free aspect,
-  ``outline_error`` 0.1 px, ``image_size`` given) on all outlines of its images (false
-  detections included, as a user would pass them): focal error % (the larger of fu, fv),
+  ``image_size`` given) on all outlines of its images (false detections included, as a
+  user would pass them), with the outline error the command line uses: ``"measured"``
+  for outlines found in images (auto, boxes), the default 0.1 px for masks and outline
+  files (masks, contours): focal error % (the larger of fu, fv),
   ``ok`` within 2 %, ``refused`` with the reason, ``WRONG`` beyond 2 %; for every
   intrinsic reported as determined (finite in ``K``), ``|error| / std``: "confident
   wrong" when beyond 3 std or 5 % of f.
@@ -62,6 +64,7 @@ WITHIN_PX = 1.0  # outline RMS counted as "within"
 FOCAL_OK = 2.0  # % focal error counted as calibrated
 WRONG_STD, WRONG_PCT = 3.0, 5.0  # a determined intrinsic beyond either is "confident wrong"
 NAMES = ("fu", "fv", "u0", "v0")
+IMAGE_COLUMNS = ("auto", "boxes")  # outlines found in images: calibrated with outline_error="measured", as the CLI
 
 
 def _call(fn, *a, **kw):
@@ -142,7 +145,9 @@ class Column:
             self.cameras.append("refused")
             return f"refused: {len(outlines)} outline(s)"
         t0 = time.perf_counter()
-        cal, ws = _call(sorjax.calibrate, outlines, image_size=size)
+        # what `sorjax calibrate` does: images' outlines carry a measured error, masks and files the default
+        err = "measured" if self.name in IMAGE_COLUMNS else 0.1
+        cal, ws = _call(sorjax.calibrate, outlines, image_size=size, outline_error=err)
         self.cal_seconds += time.perf_counter() - t0
         if isinstance(cal, Exception):
             self.cameras.append("refused")

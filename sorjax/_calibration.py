@@ -747,14 +747,17 @@ def _core_distorted(points, homs, aspect, options, image_size, valid, distortion
 
 
 def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, options: Options, image_size,
-              distortion: str = "none", fixed=None):
+              distortion: str = "none", fixed=None, leave_out: int | None = None):
     """The core on ``V`` views padded to :func:`_bucket` (copies of view 0, masked);
     returns the result of ``method`` as numpy, cut back to ``V`` views.  ``fixed``
-    (4,) ``(fu, fv, u0, v0)`` px held fixed (NaN: free), or None."""
+    (4,) ``(fu, fv, u0, v0)`` px held fixed (NaN: free), or None; ``leave_out``: a
+    view masked out as well (the same compiled program)."""
     V = points.shape[0]
     B = _bucket(V)
     pad = lambda x: np.concatenate([x, np.repeat(x[:1], B - V, axis=0)]) if B > V else x  # noqa: E731
     valid = np.arange(B) < V
+    if leave_out is not None:
+        valid[leave_out] = False
     args = (pad(points), jax.tree_util.tree_map(pad, homs), np.float64(aspect), options,
             np.asarray(image_size, np.float64), valid)
     fixed = None if fixed is None else np.asarray(fixed, np.float64)
@@ -768,6 +771,81 @@ def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, opt
     per_check = ("view_score", "view_px", "duplicate_of")
     return eqx.tree_at(lambda x: [getattr(x.checks, k) for k in per_check], r,
                        [getattr(r.checks, k)[:V] for k in per_check])
+
+
+def _estimate(K) -> np.ndarray:
+    K = np.asarray(K, np.float64)
+    return np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
+
+
+def jackknife(r, points: np.ndarray, homs: ViewHomologies, method: str, aspect, options: Options, image_size,
+              fixed=None):
+    """The core result ``r`` checked by leaving out each used view in turn, for
+    outlines of measured quality (``calibrate(outline_error="measured")``).
+
+    With ``n`` views used and ``theta_i`` the raw estimate ``(fu, fv, u0, v0)`` (px)
+    without view ``i``, the jackknife covariance is ``C_J = (n - 1) / n sum_i (theta_i
+    - mean) (theta_i - mean)^T`` (Efron and Stein 1981; a leave-one-out estimate that
+    is not finite makes it infinite).  The reported covariance becomes ``C + C_J``:
+    the bundle's covariance ``C`` is a linearisation that trusts every view, and one
+    view whose outline is wrong without looking it (a symmetric fragment of an
+    object, a box face, a leak into a shadow) moves the estimate far more than it
+    says.  An intrinsic stays determined only when its widened standard deviation is
+    at most ``options.measured_undetermined`` (1/60) of the focal length; the others
+    are set to NaN and the result code becomes ``degenerate``.  Returns ``(r, notes)``: the result with ``K``, ``covariance``,
+    ``std``, ``determined``, ``omega`` and ``result`` updated, and warning texts (none
+    when nothing was determined).  Costs one run of the compiled core per used view."""
+    det = np.asarray(r.determined, bool)
+    if not det.any() or code_name(r.result) not in ("successful", "degenerate", "only_principal_point"):
+        return r, []
+    used = np.flatnonzero(np.asarray(r.used))
+    n = len(used)
+    est = _estimate(r.K_raw)
+    loo = np.full((n, 4), np.nan)
+    for k, i in enumerate(used):
+        ri = _run_core(points, homs, method, aspect, options, image_size, "none", fixed, leave_out=int(i))
+        loo[k] = _estimate(ri.K_raw)
+    held = np.zeros(4, bool) if fixed is None else np.isfinite(np.asarray(fixed, np.float64))
+    loo[:, held] = est[held]
+    if n >= 2 and np.all(np.isfinite(loo)):
+        dev = loo - loo.mean(0)
+        C_J = (n - 1) / n * dev.T @ dev
+    else:
+        C_J = np.diag(np.where(held, 0.0, np.inf))
+    with np.errstate(invalid="ignore"):
+        cov = np.asarray(r.covariance, np.float64) + C_J
+    std = np.sqrt(np.abs(np.diag(cov)))
+    std = np.where(held, 0.0, std)
+    f_ref = math.sqrt(abs(est[0] * est[1])) if np.all(np.isfinite(est[:2])) else math.nan
+    lim = options.measured_undetermined * f_ref
+    new = det & (held | (np.isfinite(std) & (std <= lim)))
+    if np.all(np.isfinite(loo)):
+        move = np.abs(loo - est)
+        worst = int(np.argmax(np.max(move[:, :2], axis=1)))
+        moved = (f"leaving out view {int(used[worst])} moves fu by {loo[worst, 0] - est[0]:+.3g} px and fv by "
+                 f"{loo[worst, 1] - est[1]:+.3g} px")
+    else:
+        bad = [int(used[k]) for k in range(n) if not np.all(np.isfinite(loo[k]))]
+        moved = f"without view{'s' if len(bad) > 1 else ''} {', '.join(map(str, bad))} there is no estimate"
+    f_std = ", ".join(f"{nm} +- {sd:.3g} px" for nm, sd, d in zip(_NAMES, std, det) if d)
+    notes = [f"leave-one-view-out check of outlines of measured quality ({n} views): {moved}; the standard "
+             f"deviations include that spread (jackknife): {f_std}."]
+    lost = det & ~new
+    if lost.any():
+        notes.append(
+            f"{', '.join(nm for nm, d in zip(_NAMES, lost) if d)} not determined: with outlines of measured quality "
+            f"(found in images) an intrinsic counts as determined only when its standard deviation, with the "
+            f"views' leave-one-out spread, is at most {options.measured_undetermined:.3g} of the focal length "
+            f"({lim:.3g} px: 3 std within {300 * options.measured_undetermined:.3g} %); one view moves it more. "
+            "Check the outlines (the overlay), leave out the views that are not surfaces of revolution, or add views.")
+        K = np.asarray(r.K_raw, np.float64).copy()
+        for (a_, b_), d in zip(((0, 0), (1, 1), (0, 2), (1, 2)), new):
+            if not d:
+                K[a_, b_] = np.nan
+        # degenerate, not only_principal_point: that code's text blames the views' geometry
+        r = eqx.tree_at(lambda x: (x.K, x.omega, x.result), r, (K, np.full((3, 3), np.nan), RESULTS.degenerate))
+    r = eqx.tree_at(lambda x: (x.covariance, x.std, x.determined), r, (cov, std, new))
+    return r, notes
 
 
 def _check_outline_error(outline_error):
@@ -882,7 +960,13 @@ def calibrate(
             photographs; a sequence of one number per outline (px; NaN: none): as
             "measured", with each view's residual raised to that outline's own error
             estimate (what an extractor reports; with "measured", outline arrays that
-            carry an ``outline_error`` attribute give it themselves).  Outlines on a
+            carry an ``outline_error`` attribute give it themselves).  With either, the
+            estimate is also checked by leaving out each view in turn
+            (:func:`jackknife`): the spread widens the standard deviations, and an
+            intrinsic counts as determined only when its widened std is at most
+            ``Options.measured_undetermined`` (1/60) of the focal length, so that an
+            outline that is wrong without looking it (a symmetric piece of clutter
+            taken for an object) cannot make a confident wrong K.  Outlines on a
             pixel grid raise it further (whole-pixel coordinates, staircases; a pixel
             trace as ``cv2.findContours`` gives is replaced by its binary mask's
             outline, :func:`sorjax.make_outline`, and counts as accurate as that).
@@ -1022,6 +1106,10 @@ def calibrate(
     r = _run_core(points, homs, method, math.nan if aspect_ratio is None else float(aspect_ratio), options,
                   (math.nan, math.nan) if image_size is None else image_size, distortion, fixed)
 
+    if measure and distortion == "none":
+        r, jack_notes = jackknife(r, points, homs, method, math.nan if aspect_ratio is None else float(aspect_ratio),
+                                  options, (math.nan, math.nan) if image_size is None else image_size, fixed)
+        floor_note += jack_notes
     dup_of = np.asarray(r.checks.duplicate_of)
     notes = (floor_note + view_notes(homs, r.drop_reason, dup_of=dup_of) + model_notes(r, outline_error, fixed)
              + distortion_notes(r, distortion, outline_error) + verdict_notes(r, method, a, outs))

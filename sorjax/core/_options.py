@@ -64,6 +64,15 @@ class Options(eqx.Module):
       exceeds ``weak_rel_std``.
     * ``outline_error_px``: systematic outline error the symmetry residual does not
       show (0.1 px: good sub-pixel outlines; 0 for synthetic studies).
+    * ``measured_undetermined``: with outlines of measured quality (the shell's
+      ``calibrate(outline_error="measured")``, outlines found in photographs) an
+      intrinsic counts as determined only when its standard deviation, widened by the
+      views' leave-one-out (jackknife) spread, is at most this fraction of the focal
+      length: 1/60, so that 3 std stay within 5 % of it.  Such outlines carry errors
+      (a leak into a shadow, a symmetric piece of clutter taken for an object) that
+      their own residuals do not show; a K that one view moves by more than that is
+      reported as not determined (issue 17: fv 347 +- 82 px for a true 876 from
+      automatically found outlines with three fragments of one object among them).
     * ``perspective_z``, ``perspective_factor``: the focal length is determined only
       when the best camera with no perspective fits worse by a z-score of at least
       ``perspective_z`` and by at least ``perspective_factor * outline_error_px`` RMS.
@@ -105,6 +114,7 @@ class Options(eqx.Module):
     weak_rel_std: float = 0.05
     residual_floor_px: float = 0.1
     outline_error_px: float = 0.1
+    measured_undetermined: float = 1.0 / 60.0
     perspective_z: float = 3.0
     perspective_factor: float = 3.0
     consistency_z: float = 4.0
