@@ -2,7 +2,7 @@
 the renders' object masks with and without the distortion model.
 
 Each image set is three renders (:func:`sorjax.render.random_table_scene`, seeds
-``100 * set + 0..2``, three objects each) by one camera, K = 800 px, principal point
+``100 * set + 0..2``, three objects each, 150-280 px; ``--objects``, ``--size``) by one camera, K = 800 px, principal point
 (330, 235), OpenCV radial distortion ``k1`` (default -0.2).  The outlines are the
 sub-pixel outlines of the renders' label masks (:func:`sorjax.outlines_from_mask`, the
 ``sorjax calibrate --masks`` path).  Each set is calibrated with ``distortion="none"``
@@ -16,7 +16,7 @@ them (:func:`sorjax.cli.main`); the numbers are read back from the camera file's
 twin.  ``--vary`` draws each set's camera (f uniform in [600, 1000] px, the principal
 point within 5 % of the image centre; seed ``1000 + set``) instead of K = 800 px.
 
-    python experiments/photo_distortion.py [--sets 2] [--k1 -0.2] [--cli] [--vary]
+    python experiments/photo_distortion.py [--sets 2] [--k1 -0.2] [--cli] [--vary] [--objects 3] [--size 150 280]
 """
 
 from __future__ import annotations
@@ -45,10 +45,15 @@ def main(argv=None):
     p.add_argument("--k1", type=float, default=-0.2, help="the lens's k1 (default -0.2)")
     p.add_argument("--cli", action="store_true", help="run each set through `sorjax calibrate --masks` (PNG files)")
     p.add_argument("--vary", action="store_true", help="a different camera per set (seed 1000 + set)")
+    p.add_argument("--objects", type=int, default=3, help="objects per render (default 3), left to right")
+    p.add_argument("--size", type=float, nargs=2, default=(150.0, 280.0), metavar=("LO", "HI"),
+                   help="object extent in px (default 150 280); smaller objects in more slots sit nearer the "
+                        "image's edges, where the outlines show more perspective and more distortion")
     args = p.parse_args(argv)
     for st in range(args.sets):
         K = camera(st, args.vary)
-        renders = [render.random_table_scene(100 * st + s, K, n_objects=3, distortion=(args.k1, 0.0)) for s in range(3)]
+        renders = [render.random_table_scene(100 * st + s, K, n_objects=args.objects, size_px=tuple(args.size),
+                                             distortion=(args.k1, 0.0)) for s in range(3)]
         if args.cli:
             through_cli(st, K, renders, args.k1)
             continue
