@@ -26,7 +26,8 @@ robust) must map the outline onto itself within ``symmetry_px`` px RMS (or
 ``symmetry_rel`` of the outline's size when larger), over at least ``min_inliers`` of
 its samples, before trimming within ``untrimmed_factor`` times that, and it must not be
 a polygon of at most ``polygon_vertices`` straight sides (within ``polygon_rel`` of its
-size: a tile, a box face, a wallpaper pattern, which are symmetric too).  A surface of
+size plus ``polygon_px``, the rounding of its corners by blur and segmentation: a tile,
+a box face, a wallpaper pattern, which are symmetric too).  A surface of
 revolution's outline does (a mug's handle is trimmed); a leak into the background, two
 objects merged, a box or other clutter do not.  Of symmetric segmentations
 that overlap (by more than ``overlap`` of the smaller) the largest is kept: a part of an
@@ -98,8 +99,13 @@ class DetectOptions:
     symmetry_px: float = 1.0  # RMS symmetry residual (trimmed) of a kept outline, px ...
     symmetry_rel: float = 0.006  # ... or this fraction of its larger extent, when larger
     untrimmed_factor: float = 4.0  # the untrimmed residual within this many times the limit
-    polygon_vertices: int = 6  # an outline within polygon_rel of its size from a polygon of this
-    polygon_rel: float = 0.01  # many vertices (tiles, box faces) is not a surface of revolution's
+    polygon_vertices: int = 6  # an outline within polygon_rel of its size plus polygon_px from a polygon of
+    polygon_rel: float = 0.01  # this many vertices (tiles, box faces) is not a surface of revolution's
+    # ... polygon_px (reduced px): what blur and GrabCut round off a polygon's corners; with
+    # polygon_rel alone a box face with corners rounded by 2-3 px passed (photo sets 0 and 7,
+    # 3 cameras: the false detections kept had 3-8 vertices at 1.5 + 1 % of the size, 20 of
+    # 25 at most 6 on set 7; the true objects 11-24, none below 11 at 1.0-2.0 px)
+    polygon_px: float = 1.5
     min_inliers: float = 0.7  # fraction of the homology fit's samples kept by its trimming
     overlap: float = 0.3  # kept segmentations overlapping more (intersection / smaller area) are one object
     grow_rounds: int = 2  # a segmentation reaching its box's sides: the box grown that way, this many times
@@ -334,9 +340,10 @@ def judge(p, h, o: DetectOptions) -> tuple[bool, str, float]:
         return False, "no homology could be fitted to its outline", math.inf
     size = float(np.max(p.max(0) - p.min(0)))
     limit = max(o.symmetry_px, o.symmetry_rel * size)
-    poly = cv2.approxPolyDP(np.asarray(p, np.float32).reshape(-1, 1, 2), o.polygon_rel * size, True)
+    tol = o.polygon_rel * size + o.polygon_px
+    poly = cv2.approxPolyDP(np.asarray(p, np.float32).reshape(-1, 1, 2), tol, True)
     if len(poly) <= o.polygon_vertices:
-        return False, (f"a polygon ({len(poly)} straight sides within {o.polygon_rel * size:.1f} px): a tile, a box "
+        return False, (f"a polygon ({len(poly)} straight sides within {tol:.1f} px): a tile, a box "
                        "face or a pattern, not a surface of revolution"), math.inf
     rms, raw = float(h.rms), float(h.rms_untrimmed)
     frac = float(np.mean(np.asarray(h.inliers))) if h.inliers is not None else 1.0
@@ -376,8 +383,11 @@ def _segment_region(sm: np.ndarray, pbox, iterations: int, o: DetectOptions):
     cx0, cy0, cx1, cy1 = win = _crop_box(box, (h, w), margin_frac=0.0, margin_min=4)
     crop = np.ascontiguousarray(sm[cy0:cy1, cx0:cx1])
     rect = (box[0] - cx0, box[1] - cy0, box[2] - box[0] + 1, box[3] - box[1] + 1)
-    fg = _largest_component(_grabcut(crop, None, rect, iterations),
-                            (pbox[0] - cx0, pbox[1] - cy0, pbox[2] - cx0, pbox[3] - cy0))
+    try:
+        cut_fg = _grabcut(crop, None, rect, iterations)
+    except cv2.error:  # no background (or foreground) sample: the box grown to the whole crop
+        return win, np.zeros(crop.shape[:2], bool), []
+    fg = _largest_component(cut_fg, (pbox[0] - cx0, pbox[1] - cy0, pbox[2] - cx0, pbox[3] - cy0))
     if not fg.any():
         return win, fg, []
     ys, xs = np.nonzero(fg)

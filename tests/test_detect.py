@@ -102,6 +102,34 @@ def test_clutter_that_is_not_a_surface_of_revolution_is_dropped_with_a_reason():
     assert x[0] < cx < x[1]
 
 
+
+def test_a_box_face_with_rounded_corners_is_dropped_as_a_polygon():
+    # a box face seen in perspective (a symmetric trapezoid) whose corners blur and
+    # segmentation round off by about 3 px: symmetric, and within 1 % of its size of no
+    # polygon of few vertices, but of a quadrilateral once the rounding is allowed for
+    r = R.random_table_scene(1, n_objects=2, size_px=(120.0, 170.0))
+    H, W = r.image.shape[:2]
+    cx, cy = 0.5 * W, H - 70
+    quad = np.array([[cx - 60, cy - 35], [cx + 60, cy - 35], [cx + 70, cy + 35], [cx - 70, cy + 35]])
+    m = np.zeros((H, W), np.float32)
+    cv2.fillPoly(m, [np.round(quad * 16).astype(np.int32)], 1.0, lineType=cv2.LINE_AA, shift=4)
+    face = cv2.GaussianBlur(m, (0, 0), 1.5) > 0.5
+    assert not np.any((r.mask > 0) & cv2.dilate(face.astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool))
+    p, hom = T.symmetry_of(face)
+    assert T.judge(p, hom, T.DetectOptions(polygon_px=0.0))[0]  # the corners' rounding alone let it pass
+    ok, why, _ = T.judge(p, hom, T.DetectOptions())
+    assert not ok and "polygon" in why
+    cover = cv2.GaussianBlur(face.astype(np.float32), (0, 0), 0.8)[..., None]
+    img = (r.image * (1 - cover) + cover * np.array([40.0, 60.0, 200.0])).astype(np.uint8)
+    out, ws = found_with_warnings(img)
+    assert len(out) == len(r.objects)
+    for obj in r.objects:
+        assert nearest(out, obj.truth.outline) is not None
+    where = [w for w in ws if "a polygon" in w]
+    assert where, ws
+    x = [int(v) for v in where[0].split("x ")[1].split(",")[0].split("..")]
+    assert x[0] < cx < x[1]
+
 def disc_image(r_in=30.0, halo=None, contrast=100.0, noise=1.0, seed=0):
     """A 100 x 100 colour image of a disc of radius ``r_in`` centred at (50.3, 49.6)
     (exact coverage), optionally within a ring ``halo`` px wide of half its contrast on
