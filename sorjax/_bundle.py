@@ -882,8 +882,10 @@ def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, opt
     out, _ = _solved(y, problem, T, used, steps, ok, given=(cov, r))
     y = out.y
     cost_o, z, _ = _orthographic_fit(jax.lax.stop_gradient(y), frozen)
-    # its cost at the fitted z (envelope theorem: z's own derivative does not enter)
-    cost_o = computed_as(cost_o, lambda k, p: jnp.sum(residuals(_orthographic_params(z, k, p), p) ** 2), y[0], problem)
+    # its cost at the fitted z (envelope theorem: z's own derivative does not enter; z is
+    # passed, not closed over: computed_as's fn may close over no traced value)
+    cost_o = computed_as(cost_o, lambda k, p, z: jnp.sum(residuals(_orthographic_params(z, k, p), p) ** 2), y[0],
+                         problem, jax.lax.stop_gradient(z))
     return eqx.tree_at(lambda b: b.evidence, out, cost_o / T[0, 0] ** 2 - out.cost)
 
 
