@@ -28,7 +28,7 @@ from ._outline import BINARY_MASK_PX, DEFAULT_POINTS, PIXEL_TRACE_NOTE, as_outli
 from .core._assess import (ASYMMETRIC, COLLAPSED_FOCAL, CONIC, DUPLICATE, MASKED, PP_OUTSIDE, TRIMMED, USED, WIDE_FOV,
                            outline_radius, view_verdicts)
 from .core._checks import CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, MODEL_WIDENED, ModelChecks
-from .core._calibrate import calibrate_homologies, calibrate_methods
+from .core._calibrate import _intrinsics, calibrate_homologies, calibrate_methods
 from .core._options import Options
 from .core._result import RESULTS
 from .core._viewfit import ViewHomologies
@@ -774,8 +774,8 @@ def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, opt
 
 
 def _estimate(K) -> np.ndarray:
-    K = np.asarray(K, np.float64)
-    return np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
+    """``(fu, fv, u0, v0)`` (px) of a 3x3 ``K``, numpy (the core's ``_intrinsics``)."""
+    return np.asarray(_intrinsics(np.asarray(K, np.float64)))
 
 
 def jackknife(r, points: np.ndarray, homs: ViewHomologies, method: str, aspect, options: Options, image_size,
