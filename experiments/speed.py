@@ -578,7 +578,7 @@ def components(points: np.ndarray, opts, methods: tuple[str, ...]) -> list[tuple
         ("    covariance", lambda y, p, T: B.covariance.__wrapped__(y, p, T), (y, prob, c.T)),
         ("    no-perspective fit", lambda y, p: B._orthographic_fit(y, p), (y, prob)),
         ("  view scores (model checks)", lambda y, c: CH.view_scores(y, c.points_n, c.used, c.inliers, jnp.nan, c.T,
-                                                                       opts, base=c.problem), (y, c)),
+                                                                       opts, base=c.problem, ell=2.0), (y, c)),
     ]
     rows = []
     for name, f, args in parts:

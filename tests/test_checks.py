@@ -77,8 +77,10 @@ def test_views_of_two_cameras():
     a, b = scenes.two_spheres(f=700.0), scenes.two_spheres(f=1400.0)
     outs = list(a.outlines)[:2] + list(b.outlines)[:2]
     cal, notes = quiet(outs)
-    # no camera is right for all four views: flagged (a warning, the std widened) or refused
-    assert int(cal.checks.verdict) != MODEL_OK and float(cal.checks.consistency_p) < 1e-10
+    # no camera is right for all four views: flagged (a warning, the std widened) or refused;
+    # the misfit is smooth, which the noise model reads as strongly correlated noise
+    # (a long correlation length), so the score statistic is moderate, yet p << 1e-4
+    assert int(cal.checks.verdict) != MODEL_OK and float(cal.checks.consistency_p) < 1e-6
     assert not cal.success or any("not consistent with one camera" in n for n in notes)
     assert not_confidently_wrong(cal, a.K)
     cal = sorjax.calibrate(outs, outline_error=0.0)
@@ -164,7 +166,7 @@ def test_lens_distortion_widens_within_the_outline_error(barrel):
     assert any("radial lens distortion" in n and "distortion='k1'" in n for n in notes), notes
     assert not_confidently_wrong(cal, barrel.K)
     assert float(cal.checks.lens_k1) == pytest.approx(-0.05, abs=0.02)  # one Gauss-Newton step
-    assert float(cal.checks.lens_p) < 1e-10
+    assert float(cal.checks.lens_p) < 1e-6  # a smooth misfit: read as strongly correlated noise
     assert int(cal.checks.culprit) == CULPRIT_LENS and bool(cal.checks.lens_rejected)
 
 

@@ -136,9 +136,10 @@ def _bundle(c: _Common, homs: ViewHomologies, aspect, options: Options, fixed=No
                           base=c.problem)
     y = jax.lax.stop_gradient(out.y)
     args = (y, c.points_n, c.used, c.inliers, aspect, c.T, options)
-    lens = lens_release(*args, fixed, base=c.problem)
-    held = None if fixed is None else fixed_release(*args, fixed, base=c.problem)
-    return out, view_scores(*args, fixed, base=c.problem) + (lens, held)
+    ell = jax.lax.stop_gradient(out.noise_ell)
+    lens = lens_release(*args, fixed, base=c.problem, ell=ell)
+    held = None if fixed is None else fixed_release(*args, fixed, base=c.problem, ell=ell)
+    return out, view_scores(*args, fixed, base=c.problem, ell=ell) + (lens, held)
 
 
 def _distorted(c: _Common, homs: ViewHomologies, aspect, options: Options, distortion: str, fixed=None):
@@ -191,7 +192,7 @@ def _linear_aspect(method: str, aspect):
 def _linear_cov(c: _Common, K, a_m, options: Options):
     finite = jnp.all(jnp.isfinite(K))
     return linearised_covariance(c.points_n, c.used, c.inliers, c.l_n, jnp.where(finite, K, jnp.eye(3)), c.T, a_m,
-                                 options.n_samples, base=c.problem)
+                                 options.n_samples, base=c.problem, options=options)
 
 
 def _check_fixed(fixed):

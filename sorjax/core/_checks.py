@@ -22,7 +22,7 @@ at the edge (:mod:`sorjax._calibration`).
    parameters instead of 2) and the score (Lagrange multiplier) statistic of that
    release is computed at the joint optimum, ``S_j = g_j^T M_j^+ g_j`` with ``g_j =
    J_j^T r_j`` and ``M_j`` the correlated-noise covariance of ``g_j`` (the bundle's
-   own model of eq. 20's correlations, :func:`sorjax._bundle._correlated_meat`).  No
+   outline noise model, :func:`sorjax._bundle.noise_blocks`).  No
    extra solve: one Jacobian of 4 columns per view.  ``S = sum_j S_j`` is compared
    with a chi-square of ``2 V - 4`` degrees of freedom (``2 V - 3`` with a known
    aspect ratio); ``delta_j = g_j^T (J_j^T J_j)^+ g_j`` (px^2, one Gauss-Newton step's
@@ -58,10 +58,11 @@ import jax.numpy as jnp
 from jax.scipy.special import gammaincc
 from jaxtyping import Array, Bool, Float, Int
 
-from .._bundle import (BundleProblem, _correlated_meat, fixed_chart, foot_parameters, free_intrinsics, make_problem,
-                       n_params, pin_intrinsics, pixel_params, pole_polar_pairs, project_out, residual_jacobian,
+from .._bundle import (BundleProblem, fixed_chart, foot_parameters, free_intrinsics, make_problem,
+                       n_params, noise_blocks, pin_intrinsics, pixel_params, pole_polar_pairs, project_out, residual_jacobian,
                        with_model)
 from .._homology import symmetry_residuals
+from .._noise import noise_meat
 from ._options import Options
 
 # ModelChecks.verdict
@@ -164,7 +165,7 @@ def duplicate_views(points: Float[Array, "V M 2"], valid: Bool[Array, " V"], opt
     return jnp.where(jnp.any(same, axis=1), jnp.argmax(same, axis=1), -1).astype(jnp.int32)
 
 
-def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=None, base=None):
+def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=None, base=None, *, ell):
     """Score statistics of releasing each view's homology from the pole-polar
     constraint at the bundle's optimum ``y`` (normalised by ``T``); see the module's
     docstring.  Returns ``(S (V,), delta_px2 (V,), n (V,))``: the statistics
@@ -172,7 +173,9 @@ def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=N
     each view's number of samples counted (sum of weights); NaN / 0 for views not
     used.  ``fixed`` (4,): intrinsics held fixed (px, NaN: free; None: none), which
     the joint model then does not count among its parameters.  ``base``: the
-    calibration's shared problem (:func:`sorjax._bundle.with_model`), or None (built)."""
+    calibration's shared problem (:func:`sorjax._bundle.with_model`), or None (built).
+    ``ell``: the outline noise's correlation length (px), the bundle's
+    :attr:`~sorjax._bundle.BundleOut.noise_ell`."""
     fixed_n = None if fixed is None else fixed_chart(fixed, T)
     problem = (make_problem(points_n, options.n_samples, aspect, inliers, used, fixed_n) if base is None
                else with_model(base, aspect, fixed_n))
@@ -200,7 +203,7 @@ def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=N
     s2 = jnp.sum(r**2) / jnp.maximum(jnp.sum(n) - n_par, 1.0)
     # the block-diagonal Jacobian of all views' releases, (V N, 4 V), for the meat
     G = (J[:, :, None, :] * jnp.eye(V)[:, None, :, None]).reshape(V * N, V * 4)
-    meat = _correlated_meat(G, r.reshape(-1), feet, problem, s2)
+    meat = noise_meat(G, noise_blocks(y, problem, feet, T, ell, s2))
     g = jnp.einsum("vnk,vn->vk", J, r)
     blocks = jax.vmap(lambda i: jax.lax.dynamic_slice(meat, (4 * i, 4 * i), (4, 4)))(jnp.arange(V))
     S = jax.vmap(lambda gi, Mi: gi @ jnp.linalg.pinv(Mi, hermitian=True) @ gi)(g, blocks)
@@ -295,14 +298,15 @@ class Release(eqx.Module):
     beyond: Bool[Array, ""]
 
 
-def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, options: Options) -> Release:
+def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, options: Options, ell) -> Release:
     """The score (Lagrange multiplier) test of releasing the intrinsic-chart entries
     ``release`` (nk,) of a model fitted at ``y = (k (nk,), a (V, 2))`` (normalised by
     ``T``), in ``problem``'s model where they are free (their values in ``k`` are the
     held ones).  Columns of the Jacobian ``J = [J_h, J_r]`` (held, released) at ``y``:
     ``G = J_r - J_h (J_h^T J_h)^+ J_h^T J_r``, ``g = G^T r`` (``= J_r^T r`` at the held
-    model's optimum), ``S = g^T M^+ g`` with ``M`` the bundle's correlated-noise model
-    of ``Var(g)`` (:func:`sorjax._bundle._correlated_meat`), ``p = P(chi2_q > S)``;
+    model's optimum), ``S = g^T M^+ g`` with ``M = G^T Sigma_r G`` the outline noise
+    model's ``Var(g)`` (:func:`sorjax._bundle.noise_blocks`, correlation length ``ell``
+    px), ``p = P(chi2_q > S)``;
     the Gauss-Newton step of the released model ``-(J^T J)^+ J^T r`` gives ``shift``
     and ``released``.  No solve: one Jacobian."""
     nk = y[0].shape[0]
@@ -315,7 +319,7 @@ def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, opt
     n = jnp.sum(problem.weights)
     s2 = jnp.sum(r**2) / jnp.maximum(n - (n_params(y, problem) - q), 1.0)
     g = G.T @ r
-    M = _correlated_meat(G, r, feet, problem, s2)
+    M = noise_meat(G, noise_blocks(y, problem, feet, T, ell, s2))
     S = g @ jnp.linalg.pinv(M, hermitian=True) @ g
     delta = g @ jnp.linalg.pinv(G.T @ G, hermitian=True) @ g / T[0, 0] ** 2
     p = jnp.where(q > 0, gammaincc(jnp.maximum(q, 1) / 2.0, S / 2.0), jnp.nan)
@@ -329,22 +333,23 @@ def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, opt
                    rejected=rejected, beyond=beyond)
 
 
-def lens_release(y, points_n, used, inliers, aspect, T, options: Options, fixed=None, base=None) -> Release:
+def lens_release(y, points_n, used, inliers, aspect, T, options: Options, fixed=None, base=None, *, ell) -> Release:
     """:func:`release_score` of the radial distortion ``k1`` that the pinhole bundle's
     solution ``y = (k (4,), a)`` holds at 0 (the model of
     :func:`sorjax._bundle.distorted_transfer` with one coefficient; ``fixed``: the
     intrinsics held fixed, px, or None); ``released[-1]`` is the ``k1`` one
     Gauss-Newton step gives.  ``base``: the calibration's problem
-    (:func:`sorjax._bundle.with_model`), or None to build it."""
+    (:func:`sorjax._bundle.with_model`), or None to build it; ``ell`` as
+    :func:`release_score`'s."""
     fixed_n = None if fixed is None else fixed_chart(fixed, T)
     pinhole = (make_problem(points_n, options.n_samples, aspect, inliers, used, fixed_n) if base is None
                else with_model(base, aspect, fixed_n))
     problem = BundleProblem(pinhole.fields, pinhole.samples, pinhole.weights, pinhole.aspect, 1, pinhole.fixed)
     k = jnp.concatenate([y[0], jnp.zeros(1)])
-    return release_score((k, y[1]), problem, jnp.arange(5) == 4, T, options)
+    return release_score((k, y[1]), problem, jnp.arange(5) == 4, T, options, ell)
 
 
-def fixed_release(y, points_n, used, inliers, aspect, T, options: Options, fixed, base=None) -> Release:
+def fixed_release(y, points_n, used, inliers, aspect, T, options: Options, fixed, base=None, *, ell) -> Release:
     """:func:`release_score` of the intrinsics ``fixed`` (4,) px (NaN: free) that the
     bundle's solution ``y = (k (4,), a)`` holds: released all at once (as many degrees
     of freedom as are fixed and estimable: ``fu`` with a known aspect ratio follows
@@ -354,4 +359,4 @@ def fixed_release(y, points_n, used, inliers, aspect, T, options: Options, fixed
                else with_model(base, aspect))
     k = pin_intrinsics(y[0], chart)
     release = jnp.isfinite(chart) & free_intrinsics(aspect, None)
-    return release_score((k, y[1]), problem, release, T, options)
+    return release_score((k, y[1]), problem, release, T, options, ell)
