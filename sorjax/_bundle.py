@@ -66,11 +66,11 @@ from jaxtyping import Array, Float
 from ._camera import intrinsics_matrix, omega_matrix, omega_vector_from_intrinsics
 from ._camera import pixel_intrinsics as _pixel_intrinsics
 from ._distortion import distort, undistort
-from ._field import (DistanceField, checked_distances, closest_parameter, curve, curve_points, gaussian_smooth_closed,
-                     make_field, setup, signed_distances)
+from ._field import DistanceField, checked_distances, closest_parameter, setup, signed_distances
 from ._homology import homology_matrix, symmetry_checked, symmetry_feet, symmetry_residuals, transfer
 from ._linear import focal_from_principal_point, linear_estimates
-from ._noise import NoiseGeometry, estimate_noise, noise_geometry, noise_meat, unit_blocks
+from ._noise import (NoiseGeometry, estimate_noise, knot_spacing_px, noise_geometry, noise_meat, sample_normals,
+                     smoothed_outline, unit_blocks)
 from ._solvers import NULL_RCOND, Solved, computed_as, is_stale, polish_traced, solvers, until_fresh_traced
 from .core._options import Options
 
@@ -570,21 +570,12 @@ def _step_length(J, r, s2):
 
 def smoothed_problem(problem: BundleProblem, smooth_px, scale) -> BundleProblem:
     """``problem`` with every outline smoothed along the curve by a Gaussian of
-    ``smooth_px`` px (``scale`` px per normalised unit): new fields and samples, the
-    same weights.  What :func:`covariance` reads the Jacobian from."""
-    knots = problem.fields.knots
-    M, N = knots.shape[1], problem.samples.shape[1]
-    sig = smooth_px / knot_spacing_px(problem, scale)
-    fields = jax.vmap(lambda p, s: make_field(gaussian_smooth_closed(p, s)))(knots, sig)
-    samples = jax.vmap(lambda f: curve_points(f, N))(fields)
+    ``smooth_px`` px (``scale`` px per normalised unit,
+    :func:`sorjax._noise.smoothed_outline`): new fields and samples, the same weights.
+    What :func:`covariance` reads the Jacobian from."""
+    N = problem.samples.shape[1]
+    fields, samples = jax.vmap(lambda f: smoothed_outline(f, N, smooth_px, scale))(problem.fields)
     return BundleProblem(fields, samples, problem.weights, problem.aspect, problem.n_dist, problem.fixed)
-
-
-def knot_spacing_px(problem: BundleProblem, scale) -> Float[Array, " V"]:
-    """Each outline's knot spacing in pixels (its perimeter over its knots)."""
-    knots = problem.fields.knots
-    per = jnp.sum(jnp.linalg.norm(jnp.roll(knots, -1, axis=1) - knots, axis=-1), axis=-1)
-    return per * scale / knots.shape[1]
 
 
 def noise_geometry_at(y, problem: BundleProblem, feet, scale) -> NoiseGeometry:
@@ -592,25 +583,16 @@ def noise_geometry_at(y, problem: BundleProblem, feet, scale) -> NoiseGeometry:
     the residuals at ``y`` with closest-point parameters ``feet`` (V, N): each
     weighted residual's sensitivity to its own sample moving along the outward
     normal (one JVP of :func:`residuals`), the weights and the arc lengths."""
-    knots = problem.fields.knots
-    M, N = knots.shape[1], problem.samples.shape[1]
-    t = jnp.arange(N) * (M / N)
-    area = 0.5 * jnp.sum(knots[..., 0] * jnp.roll(knots[..., 1], -1, axis=1)
-                         - jnp.roll(knots[..., 0], -1, axis=1) * knots[..., 1], axis=1)
-
-    def normals(field, sgn):
-        d1 = jax.vmap(lambda s: curve(field, s)[1])(t)
-        n = jnp.stack([d1[:, 1], -d1[:, 0]], axis=-1)  # outward for a positively oriented curve
-        return sgn * n / jnp.linalg.norm(n, axis=-1, keepdims=True)
-
-    nu = jax.vmap(normals)(problem.fields, jnp.where(area < 0, -1.0, 1.0))
+    M, N = problem.fields.knots.shape[1], problem.samples.shape[1]
+    nu = jax.vmap(lambda f: sample_normals(f, N))(problem.fields)
 
     def moved(samples):
         return residuals(y, BundleProblem(problem.fields, samples, problem.weights, problem.aspect, problem.n_dist,
                                           problem.fixed), feet)
 
     _, a = jax.jvp(moved, (problem.samples,), (nu,))
-    return noise_geometry(a.reshape(problem.weights.shape), problem.weights, feet, knot_spacing_px(problem, scale), M)
+    spacing = jax.vmap(lambda f: knot_spacing_px(f, scale))(problem.fields)
+    return noise_geometry(a.reshape(problem.weights.shape), problem.weights, feet, spacing, M)
 
 
 def _placeholder_outline(m: int):

@@ -49,6 +49,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from ._field import DistanceField, curve, curve_points, gaussian_smooth_closed, make_field
+
 # the grid of correlation lengths searched (px): N_ELL values, geometric between the
 # Options' noise_ell_min_px and noise_ell_max_px (quarter octaves over 0.25-32 px)
 N_ELL = 29
@@ -134,6 +136,32 @@ def estimate_noise(geo: NoiseGeometry, r: Float[Array, "V N"], J: Float[Array, "
     m0, m = jax.vmap(moments)(ells)
     k = jnp.argmin(jnp.sum((m - emp) ** 2, axis=1))
     return ells[k], rr / jnp.maximum(m0[k], 1e-300)
+
+
+def knot_spacing_px(field: DistanceField, scale) -> Float[Array, ""]:
+    """An outline's knot spacing in pixels (its perimeter over its knots; ``scale``
+    pixels per unit of the field)."""
+    k = field.knots
+    return jnp.sum(jnp.linalg.norm(jnp.roll(k, -1, axis=0) - k, axis=-1)) * scale / k.shape[0]
+
+
+def sample_normals(field: DistanceField, n: int) -> Float[Array, "n 2"]:
+    """Unit outward normals at the ``n`` samples ``t_i = i M / n`` of an outline
+    (:func:`sorjax._field.curve_points`), whichever way it runs."""
+    k = field.knots
+    area = 0.5 * jnp.sum(k[:, 0] * jnp.roll(k[:, 1], -1) - jnp.roll(k[:, 0], -1) * k[:, 1])
+    t = jnp.arange(n) * (k.shape[0] / n)
+    d1 = jax.vmap(lambda s: curve(field, s)[1])(t)
+    nrm = jnp.stack([d1[:, 1], -d1[:, 0]], axis=-1)  # outward for a positively oriented curve
+    return jnp.where(area < 0, -1.0, 1.0) * nrm / jnp.linalg.norm(nrm, axis=-1, keepdims=True)
+
+
+def smoothed_outline(field: DistanceField, n: int, smooth_px, scale):
+    """``(field, samples)`` of the outline smoothed along the curve by a Gaussian of
+    ``smooth_px`` px (``scale`` px per unit): where a covariance reads its Jacobian,
+    the noise's tilt of the normals averaged out."""
+    sm = make_field(gaussian_smooth_closed(field.knots, smooth_px / knot_spacing_px(field, scale)))
+    return sm, curve_points(sm, n)
 
 
 def noise_meat(G: Float[Array, "VN q"], blocks: Float[Array, "V N N"]) -> Float[Array, "q q"]:

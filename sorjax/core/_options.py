@@ -54,8 +54,16 @@ class Options(eqx.Module):
 
     Verdicts on the estimate:
 
-    * ``undetermined``: an intrinsic whose standard deviation exceeds this fraction
-      of the focal length (a 3-sigma interval reaching zero) is not determined.
+    * ``undetermined``: a principal point coordinate whose standard deviation exceeds
+      this fraction of the focal length (a 3-sigma interval as wide as f) is not
+      determined.
+    * ``focal_undetermined``: a focal length whose standard deviation exceeds this
+      fraction of itself is not determined: 1/6, where the 3-sigma interval of
+      ``1 / f^2`` (what the image of the absolute conic holds, and what the outlines
+      determine linearly: ``f ~ w^-1/2`` for a vertex at inverse distance ``w``)
+      reaches zero, so that no finite upper bound of f is supported.  With 1/3 (the
+      3-sigma interval of f itself reaching zero) one view almost on the principal
+      point's axis gave fv = 451 +- 107 px for a true 1200 (z = -7; issue 18).
     * ``min_focal_fraction``: a focal length below this fraction of the outlines'
       extent is implausible (more than 90 deg of view).
     * ``max_fov_deg``: with the image size known, a wider field of view is implausible.
@@ -118,6 +126,7 @@ class Options(eqx.Module):
     note_trimmed: float = 0.02
 
     undetermined: float = 1.0 / 3.0
+    focal_undetermined: float = 1.0 / 6.0
     min_focal_fraction: float = 0.5
     max_fov_deg: float = 120.0
     weak_rel_std: float = 0.05
