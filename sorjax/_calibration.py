@@ -244,10 +244,10 @@ MAX_TRIMMED = _O.max_trimmed
 NOTE_TRIMMED = _O.note_trimmed
 # An intrinsic is "not determined" when its standard deviation (the covariance at the
 # estimate, scaled by the residual -- at least RESIDUAL_FLOOR_PX when every v_x is at
-# infinity) is infinite or above FOCAL_UNDETERMINED times itself (a focal length: the
-# 3-sigma interval of 1 / f^2 reaching zero) or UNDETERMINED times the focal length (a
-# principal point coordinate; times the outlines' RMS radius when the focal length
-# itself is not determined).
+# infinity) is infinite or above UNDETERMINED times the focal length (for the
+# principal point: times the outlines' RMS radius when the focal length itself is not
+# determined): a 3-sigma interval reaching zero.  A focal length from one view: above
+# FOCAL_UNDETERMINED times itself (the 3-sigma interval of 1 / f^2 reaching zero).
 UNDETERMINED = _O.undetermined
 FOCAL_UNDETERMINED = _O.focal_undetermined
 # A focal length below MIN_FOCAL_FRACTION of the extent of the outlines (their

@@ -90,13 +90,14 @@ class Verdict(eqx.Module):
 
 
 def assess(est, cov_unit, s_px, radius, extent, image_size, free_aspect, floor_verdict, perspective_ok,
-           options: Options) -> Verdict:
+           options: Options, single_view=False) -> Verdict:
     """Which of the raw estimate ``est = (fu, fv, u0, v0)`` (px) the views determine,
     from the covariance per px^2 of residual ``cov_unit`` (4, 4) and the residual
-    standard error ``s_px``.  A focal length is determined when its std is finite and
-    at most ``focal_undetermined`` times itself, the principal point when its std is
-    at most ``undetermined`` times the focal length (times the outlines' RMS
-    ``radius`` when the focal length is not determined).  With
+    standard error ``s_px``.  An intrinsic is determined when its std is finite and at
+    most ``undetermined`` times the focal length (the principal point: times the
+    outlines' RMS ``radius`` when the focal length is not determined); a focal length
+    from a ``single_view`` (bool) only when its std is at most ``focal_undetermined``
+    times itself.  With
     ``floor_verdict`` (every ``v_x`` at infinity, where theory says the focal length is
     free) the std is taken at a residual of at least ``residual_floor_px``, so the
     estimate must fix the focal length robustly to override that.  Nothing is
@@ -108,7 +109,8 @@ def assess(est, cov_unit, s_px, radius, extent, image_size, free_aspect, floor_v
     std_floor = std / jnp.maximum(s_px, 1e-300) * s_floor
     judged = jnp.where(floor_verdict, std_floor, std)
     why = implausible(est, extent, image_size, options)
-    focal_ok = jnp.isfinite(std[:2]) & (judged[:2] <= options.focal_undetermined * jnp.abs(est[:2]))
+    focal_frac = jnp.where(single_view, options.focal_undetermined, options.undetermined)
+    focal_ok = jnp.isfinite(std[:2]) & (judged[:2] <= focal_frac * jnp.abs(est[:2]))
     ref = jnp.where(jnp.all(focal_ok), jnp.sqrt(jnp.abs(est[0] * est[1])), radius)
     pp_ok = jnp.isfinite(std[2:]) & (judged[2:] <= options.undetermined * ref)
     determined = jnp.concatenate([focal_ok, pp_ok]) & (why == PLAUSIBLE) & perspective_ok

@@ -411,7 +411,7 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
         dist_k, dist_std, dist_g, dist_z = distortion
     est = _intrinsics(K)
     verdict = assess(est, cov_unit, s_px, jnp.sqrt(jnp.sum(jnp.where(used, radius**2, 0.0)) / jnp.maximum(n_used, 1)),
-                     outline_extent(points, used), image_size, free_aspect, all_inf, persp_ok, options)
+                     outline_extent(points, used), image_size, free_aspect, all_inf, persp_ok, options, n_used == 1)
     determined = verdict.determined & assessed
     success = code == RESULTS.successful
 

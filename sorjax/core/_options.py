@@ -54,16 +54,17 @@ class Options(eqx.Module):
 
     Verdicts on the estimate:
 
-    * ``undetermined``: a principal point coordinate whose standard deviation exceeds
-      this fraction of the focal length (a 3-sigma interval as wide as f) is not
-      determined.
-    * ``focal_undetermined``: a focal length whose standard deviation exceeds this
-      fraction of itself is not determined: 1/6, where the 3-sigma interval of
-      ``1 / f^2`` (what the image of the absolute conic holds, and what the outlines
-      determine linearly: ``f ~ w^-1/2`` for a vertex at inverse distance ``w``)
-      reaches zero, so that no finite upper bound of f is supported.  With 1/3 (the
-      3-sigma interval of f itself reaching zero) one view almost on the principal
-      point's axis gave fv = 451 +- 107 px for a true 1200 (z = -7; issue 18).
+    * ``undetermined``: an intrinsic whose standard deviation exceeds this fraction
+      of the focal length (a 3-sigma interval reaching zero) is not determined.
+    * ``focal_undetermined``: a focal length from ONE view (principal point fixed)
+      whose standard deviation exceeds this fraction of itself is not determined:
+      1/6, where the 3-sigma interval of ``w ~ 1 / f^2`` (the vertex's inverse
+      distance, which the outline determines linearly) reaches zero, so that no
+      finite upper bound of f is supported.  With 1/3 one view almost on the
+      principal point's axis gave fv = 451 +- 107 px for a true 1200 (z = -7; issue
+      18).  Not applied to several views: on Table 1 (3 views) the focal lengths with
+      std between 1/6 and 1/3 of f lay within their std (0-2 of ~100 per cell beyond
+      3 std), and 1/6 there refused up to 60 % of Method I's trials at f = 1400 px.
     * ``min_focal_fraction``: a focal length below this fraction of the outlines'
       extent is implausible (more than 90 deg of view).
     * ``max_fov_deg``: with the image size known, a wider field of view is implausible.
