@@ -58,9 +58,9 @@ import jax.numpy as jnp
 from jax.scipy.special import gammaincc
 from jaxtyping import Array, Bool, Float, Int
 
-from .._bundle import (BundleProblem, fixed_chart, foot_parameters, free_intrinsics, make_problem,
-                       n_params, noise_blocks, pin_intrinsics, pixel_params, pole_polar_pairs, project_out, residual_jacobian,
-                       with_model)
+from .._bundle import (BundleProblem, fixed_chart, foot_parameters, free_intrinsics, make_problem, noise_blocks,
+                       pin_intrinsics, pixel_params, pole_polar_pairs, project_out, residual_jacobian,
+                       residual_variance, with_model)
 from .._homology import symmetry_residuals
 from .._noise import noise_meat
 from ._options import Options
@@ -317,7 +317,7 @@ def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, opt
     G = project_out(Jr, Jh)
     q = jnp.sum(rel).astype(jnp.int32)
     n = jnp.sum(problem.weights)
-    s2 = jnp.sum(r**2) / jnp.maximum(n - (n_params(y, problem) - q), 1.0)
+    s2 = residual_variance(r, y, problem, q)
     g = G.T @ r
     M = noise_meat(G, noise_blocks(y, problem, feet, T, ell, s2))
     S = g @ jnp.linalg.pinv(M, hermitian=True) @ g
