@@ -24,7 +24,8 @@ from jaxtyping import Array, Float, Int
 
 from ._checks import check_sizes
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
-from ._outline import BINARY_MASK_PX, DEFAULT_POINTS, PIXEL_TRACE_NOTE, as_outlines, implied_outline_error
+from ._outline import (BINARY_MASK_PX, DEFAULT_POINTS, PIXEL_TRACE_NOTE, as_outlines, implied_outline_error,
+                       jagged_note, jagged_smoothing)
 from .core._assess import (ASYMMETRIC, COLLAPSED_FOCAL, CONIC, DUPLICATE, MASKED, PP_OUTSIDE, TRIMMED, USED, WIDE_FOV,
                            outline_radius, view_verdicts)
 from .core._checks import CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, MODEL_WIDENED, ModelChecks
@@ -1080,6 +1081,11 @@ def calibrate(
     traces = [i for i, t in enumerate(implied) if t[1] == "pixel trace"]
     floor_note = [f"outline{'s' if len(traces) > 1 else ''} {', '.join(map(str, traces))}: {PIXEL_TRACE_NOTE}"
                   ] if traces else []
+    jagged = [(i, j) for i, j in enumerate(map(jagged_smoothing, raw)) if j]
+    if jagged:
+        jit = [j[0] for _, j in jagged]
+        floor_note.append(f"outline{'s' if len(jagged) > 1 else ''} {', '.join(str(i) for i, _ in jagged)}: "
+                          + jagged_note(min(jit), max(j[1] for _, j in jagged), max(jit)))
     if floor_px > float(outline_error):
         which = [i for i, t in enumerate(implied) if t[0] == floor_px]
         why = {"staircase": "an unsmoothed staircase along or between pixels (up to half a pixel off the edge)",
