@@ -250,7 +250,7 @@ def _make_outline(points, n_points: int, *, name: str, note: bool) -> Outline:
         arr = outline_of_pixel_trace(arr, name=name)
         if note:
             warnings.warn(f"{name}: {PIXEL_TRACE_NOTE}", stacklevel=4)
-    elif not isinstance(points, Outline) and point_jitter(arr) > JAGGED_PX:
+    elif not isinstance(points, Outline) and is_jagged(arr):
         arr, jitter, left = smooth_jagged(arr)
         if note:
             warnings.warn(f"{name}: {jagged_note(jitter, left)}", stacklevel=4)
@@ -328,6 +328,9 @@ def outline_of_pixel_trace(p: np.ndarray, *, name: str = "outline") -> np.ndarra
 # outlines are smoothed along the curve before they are fitted.
 JAGGED_PX = 0.05  # point-to-point jitter (px, independent part) above which an outline is smoothed
 JAGGED_SMOOTH_PX = 4.0  # the smoothing's Gaussian std along the curve (px)
+# Only dense outlines are read as jagged (raw edge points lie <= 1 px apart); a sparse
+# polygon (an annotation tool's vertices, irregularly spaced) bends by its own sagitta.
+JAGGED_MAX_SPACING_PX = 2.0
 
 
 def _second_offsets(p: np.ndarray) -> np.ndarray:
@@ -366,6 +369,29 @@ def point_jitter(p) -> float:
     return float(1.4826 * np.median(np.abs(e - np.median(e))) / np.sqrt(70.0 / 16.0))
 
 
+def _index_smoothed(q: np.ndarray, sigma_points: float, twice: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The closed sequence ``q`` (N, 2) smoothed by a circular Gaussian of
+    ``sigma_points`` points in its index (``twice``: twicing, gain ``2G - G^2``), and
+    the gain per rfft frequency."""
+    n = len(q)
+    g = np.exp(-2.0 * (np.pi * np.fft.rfftfreq(n) * sigma_points) ** 2)
+    gain = 2.0 * g - g**2 if twice else g
+    return np.fft.irfft(np.fft.rfft(q, axis=0) * gain[:, None], n=n, axis=0), gain
+
+
+def _arc_per_point(q: np.ndarray) -> float:
+    """Arc length per point (px) of the closed sequence ``q``, measured on it smoothed by
+    8 points in its index (a zigzag's own chord length is mostly noise)."""
+    return float(perimeter(_index_smoothed(q, 8.0, False)[0])) / len(q)
+
+
+def is_jagged(p: np.ndarray) -> bool:
+    """Whether :func:`make_outline` smooths the validated outline ``p`` (N, 2 px) as
+    jagged: :func:`point_jitter` above ``JAGGED_PX`` on a dense outline (at most
+    ``JAGGED_MAX_SPACING_PX`` of arc per point)."""
+    return point_jitter(p) > JAGGED_PX and _arc_per_point(np.asarray(p, np.float64)) <= JAGGED_MAX_SPACING_PX
+
+
 def smooth_jagged(p: np.ndarray, smooth_px: float = JAGGED_SMOOTH_PX) -> tuple[np.ndarray, float, float]:
     """A jagged closed outline ``p`` (N, 2 px; :func:`point_jitter` > ``JAGGED_PX``)
     smoothed along the curve.  Returns ``(points, jitter, left)``: the smoothed points
@@ -381,19 +407,9 @@ def smooth_jagged(p: np.ndarray, smooth_px: float = JAGGED_SMOOTH_PX) -> tuple[n
     impulse response ``w``: at 1 px of noise 0.3 px apart about 0.17 px, correlated
     over ``smooth_px``."""
     q = np.asarray(p, np.float64)
-    n = len(q)
-    freq = np.fft.rfftfreq(n)  # cycles per point
-
-    def filtered(x, sigma_points, twice):
-        g = np.exp(-2.0 * (np.pi * freq * sigma_points) ** 2)
-        gain = 2.0 * g - g**2 if twice else g
-        return np.fft.irfft(np.fft.rfft(x, axis=0) * gain[:, None], n=n, axis=0), gain
-
-    rough, _ = filtered(q, 8.0, False)
-    h = perimeter(rough) / n  # px of arc per point
-    sigma_points = max(float(smooth_px) / float(h), 1.0)
-    out, gain = filtered(q, sigma_points, True)
-    impulse = np.fft.irfft(gain, n=n)  # the filter's weights w_k (w_0 at the point itself)
+    sigma_points = max(float(smooth_px) / _arc_per_point(q), 1.0)
+    out, gain = _index_smoothed(q, sigma_points, True)
+    impulse = np.fft.irfft(gain, n=len(q))  # the filter's weights w_k (w_0 at the point itself)
     tangent = np.roll(out, -1, axis=0) - np.roll(out, 1, axis=0)
     normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1) / np.linalg.norm(tangent, axis=1)[:, None]
     off = np.sum((q - out) * normal, axis=1)
@@ -410,7 +426,7 @@ def jagged_smoothing(points) -> tuple[float, float] | None:
     if isinstance(points, Outline):
         return None
     arr = validate_points(points)
-    if is_pixel_trace(arr) or point_jitter(arr) <= JAGGED_PX:
+    if is_pixel_trace(arr) or not is_jagged(arr):
         return None
     return smooth_jagged(arr)[1:]
 

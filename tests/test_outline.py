@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from sorjax._outline import (JAGGED_PX, make_outline, point_jitter, resample_closed, signed_area, smooth_jagged,
-                             validate_points)
+from sorjax._outline import (JAGGED_PX, is_jagged, make_outline, point_jitter, resample_closed, signed_area,
+                             smooth_jagged, validate_points)
 
 
 def ellipse(n=300, a=120.0, b=70.0, cx=320.0, cy=240.0):
@@ -140,3 +140,14 @@ def test_smooth_jagged_removes_the_jitter_and_keeps_the_curve():
     with pytest.warns(UserWarning, match="jitter by"):
         o = make_outline(noisy, 1024)
     assert point_jitter(np.asarray(o.points)) < JAGGED_PX
+
+
+def test_sparse_polygons_are_not_read_as_jagged():
+    # an annotation tool's polygon: 40 irregularly spaced vertices of an ellipse (~15 px
+    # apart) bends by its sagitta, not by noise; it is interpolated, not smoothed
+    rng = np.random.default_rng(2)
+    t = np.sort(rng.uniform(0, 2 * np.pi, 40))
+    poly = np.stack([320 + 120 * np.cos(t), 240 + 70 * np.sin(t)], 1)
+    assert not is_jagged(poly)
+    e = ellipse(4000)
+    assert is_jagged(e + rng.normal(0, 0.3, e.shape)) and not is_jagged(e)

@@ -27,7 +27,7 @@ import numpy as np
 
 from .. import core, scenes
 from .._calibration import code_name, view_notes, verdict_notes
-from .._outline import JAGGED_PX, point_jitter, resample_closed, signed_area, smooth_jagged
+from .._outline import is_jagged, resample_closed, signed_area, smooth_jagged
 from ._config import Config, SceneConfig
 
 
@@ -76,7 +76,7 @@ def _resampled(o: np.ndarray, n: int) -> np.ndarray:
     :func:`sorjax.make_outline` smooths: i.i.d. noise per point) and resampled to ``n``
     points (the scenes' outlines are valid by construction: no boundary validation)."""
     o = np.asarray(o, dtype=np.float64)
-    if point_jitter(o) > JAGGED_PX:
+    if is_jagged(o):
         o = smooth_jagged(o)[0]
     return resample_closed(o if signed_area(o) > 0 else o[::-1], n)
 
