@@ -24,8 +24,7 @@ from jaxtyping import Array, Float, Int
 
 from ._checks import check_sizes
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
-from ._outline import (BINARY_MASK_PX, DEFAULT_POINTS, PIXEL_TRACE_NOTE, as_outlines, implied_outline_error,
-                       jagged_note, jagged_smoothing)
+from ._outline import BINARY_MASK_PX, DEFAULT_POINTS, PIXEL_TRACE_NOTE, _as_outlines, implied_outline_error, jagged_note
 from .core._assess import (ASYMMETRIC, COLLAPSED_FOCAL, CONIC, DUPLICATE, MASKED, PP_OUTSIDE, TRIMMED, USED, WIDE_FOV,
                            outline_radius, view_verdicts)
 from .core._checks import CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, MODEL_WIDENED, ModelChecks
@@ -1050,7 +1049,8 @@ def calibrate(
                              f"{image_size!r}.") from None
         image_size = (iw, ih)
     pp_fixed, f_fixed = _check_fixed(principal_point, focal_length, image_size, method)
-    outs = as_outlines(outlines, n_points)
+    prepared = _as_outlines(outlines, n_points)
+    outs, smoothed = [o for o, _ in prepared], [j for _, j in prepared]
     if per_outline is not None and len(per_outline) != len(outs):
         raise ValueError(f"outline_error: got {len(per_outline)} per-outline errors for {len(outs)} outlines; give one "
                          "number (px) per outline, in the same order, or one number for all, or 'measured'.")
@@ -1081,7 +1081,7 @@ def calibrate(
     traces = [i for i, t in enumerate(implied) if t[1] == "pixel trace"]
     floor_note = [f"outline{'s' if len(traces) > 1 else ''} {', '.join(map(str, traces))}: {PIXEL_TRACE_NOTE}"
                   ] if traces else []
-    jagged = [(i, j) for i, j in enumerate(map(jagged_smoothing, raw)) if j]
+    jagged = [(i, j) for i, j in enumerate(smoothed) if j]
     if jagged:
         jit = [j[0] for _, j in jagged]
         floor_note.append(f"outline{'s' if len(jagged) > 1 else ''} {', '.join(str(i) for i, _ in jagged)}: "

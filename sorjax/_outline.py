@@ -22,6 +22,7 @@ from jaxtyping import Array, Float
 from ._checks import MAX_POINTS as MAX_RESAMPLED
 from ._checks import MIN_POINTS as MIN_RESAMPLED
 from ._checks import integer
+from ._field import gaussian_smooth_closed
 
 DEFAULT_POINTS = 2048
 MIN_POINTS = 10
@@ -236,24 +237,26 @@ def make_outline(points, n_points: int = DEFAULT_POINTS, *, name: str = "outline
     for a binary mask) is first replaced by the outline of the binary mask it bounds,
     as :func:`sorjax.outlines_from_mask` traces it (:func:`outline_of_pixel_trace`),
     with a warning saying so."""
-    return _make_outline(points, n_points, name=name, note=True)
+    return _make_outline(points, n_points, name=name, note=True)[0]
 
 
-def _make_outline(points, n_points: int, *, name: str, note: bool) -> Outline:
-    """:func:`make_outline`; ``note``: warn when a pixel trace is replaced (the caller
-    that says so itself, :func:`sorjax.calibrate`, passes False)."""
+def _make_outline(points, n_points: int, *, name: str, note: bool) -> tuple[Outline, tuple[float, float] | None]:
+    """:func:`make_outline`, and ``(jitter, left)`` (px, :func:`smooth_jagged`) where
+    the points were smoothed as jagged (else None); ``note``: warn when a pixel trace is
+    replaced or a jagged outline smoothed (the caller that says so itself,
+    :func:`sorjax.calibrate`, passes False)."""
     n_points = integer(n_points, "n_points", lo=MIN_RESAMPLED, hi=MAX_RESAMPLED, what="points of the resampled outline")
     if isinstance(points, Outline) and points.n_points == n_points:
-        return points
-    arr = validate_points(points, name=name)
+        return points, None
+    arr, jagged = validate_points(points, name=name), None
     if not isinstance(points, Outline) and is_pixel_trace(arr):
         arr = outline_of_pixel_trace(arr, name=name)
         if note:
             warnings.warn(f"{name}: {PIXEL_TRACE_NOTE}", stacklevel=4)
     elif not isinstance(points, Outline) and is_jagged(arr):
-        arr, jitter, left = smooth_jagged(arr)
+        arr, *jagged = smooth_jagged(arr)
         if note:
-            warnings.warn(f"{name}: {jagged_note(jitter, left)}", stacklevel=4)
+            warnings.warn(f"{name}: {jagged_note(*jagged)}", stacklevel=4)
     if float(signed_area(arr)) < 0:
         arr = arr[::-1]
     spacing = float(np.mean(np.linalg.norm(np.roll(arr, -1, axis=0) - arr, axis=1)))
@@ -264,7 +267,7 @@ def _make_outline(points, n_points: int, *, name: str, note: bool) -> Outline:
             "biased. Pass a denser outline (e.g. from sorjax.outlines_from_mask, 0.5 px apart).",
             stacklevel=4 if note else 3,
         )
-    return Outline(jnp.asarray(resample_closed(arr, n_points)))
+    return Outline(jnp.asarray(resample_closed(arr, n_points))), None if jagged is None else tuple(jagged)
 
 
 # ------------------------------------------------------------------ pixel traces
@@ -369,20 +372,23 @@ def point_jitter(p) -> float:
     return float(1.4826 * np.median(np.abs(e - np.median(e))) / np.sqrt(70.0 / 16.0))
 
 
-def _index_smoothed(q: np.ndarray, sigma_points: float, twice: bool) -> tuple[np.ndarray, np.ndarray]:
+def _smoothed(q: np.ndarray, sigma_points: float) -> np.ndarray:
     """The closed sequence ``q`` (N, 2) smoothed by a circular Gaussian of
-    ``sigma_points`` points in its index (``twice``: twicing, gain ``2G - G^2``), and
-    the gain per rfft frequency."""
-    n = len(q)
-    g = np.exp(-2.0 * (np.pi * np.fft.rfftfreq(n) * sigma_points) ** 2)
-    gain = 2.0 * g - g**2 if twice else g
-    return np.fft.irfft(np.fft.rfft(q, axis=0) * gain[:, None], n=n, axis=0), gain
+    ``sigma_points`` points in its index (:func:`sorjax._field.gaussian_smooth_closed`)."""
+    return np.asarray(gaussian_smooth_closed(jnp.asarray(q, jnp.float64), sigma_points))
+
+
+def _twiced(q: np.ndarray, sigma_points: float) -> np.ndarray:
+    """:func:`_smoothed` by twicing, ``2 G q - G G q`` (gain ``2G - G^2``): the
+    Gaussian's shrinkage of curves, ``s^2 / 2R``, taken back to fourth order in ``s``."""
+    once = _smoothed(q, sigma_points)
+    return 2.0 * once - _smoothed(once, sigma_points)
 
 
 def _arc_per_point(q: np.ndarray) -> float:
     """Arc length per point (px) of the closed sequence ``q``, measured on it smoothed by
     8 points in its index (a zigzag's own chord length is mostly noise)."""
-    return float(perimeter(_index_smoothed(q, 8.0, False)[0])) / len(q)
+    return float(perimeter(_smoothed(q, 8.0))) / len(q)
 
 
 def is_jagged(p: np.ndarray) -> bool:
@@ -408,8 +414,10 @@ def smooth_jagged(p: np.ndarray, smooth_px: float = JAGGED_SMOOTH_PX) -> tuple[n
     over ``smooth_px``."""
     q = np.asarray(p, np.float64)
     sigma_points = max(float(smooth_px) / _arc_per_point(q), 1.0)
-    out, gain = _index_smoothed(q, sigma_points, True)
-    impulse = np.fft.irfft(gain, n=len(q))  # the filter's weights w_k (w_0 at the point itself)
+    out = _twiced(q, sigma_points)
+    delta = np.zeros_like(q)
+    delta[0] = 1.0
+    impulse = _twiced(delta, sigma_points)[:, 0]  # the filter's weights w_k (w_0 at the point itself)
     tangent = np.roll(out, -1, axis=0) - np.roll(out, 1, axis=0)
     normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1) / np.linalg.norm(tangent, axis=1)[:, None]
     off = np.sum((q - out) * normal, axis=1)
@@ -417,18 +425,6 @@ def smooth_jagged(p: np.ndarray, smooth_px: float = JAGGED_SMOOTH_PX) -> tuple[n
     w2 = float(np.sum(impulse**2))
     jitter = spread / np.sqrt(max(1.0 - 2.0 * float(impulse[0]) + w2, 1e-12))
     return out, jitter, jitter * np.sqrt(w2)
-
-
-def jagged_smoothing(points) -> tuple[float, float] | None:
-    """``(jitter, left)`` (px; :func:`smooth_jagged`) when :func:`make_outline` smooths
-    the user's ``points`` as jagged, else None (smooth outlines, pixel traces, which
-    are replaced instead, and :class:`Outline` objects)."""
-    if isinstance(points, Outline):
-        return None
-    arr = validate_points(points)
-    if is_pixel_trace(arr) or not is_jagged(arr):
-        return None
-    return smooth_jagged(arr)[1:]
 
 
 def jagged_note(jitter: float, left: float, jitter_max: float | None = None) -> str:
@@ -502,6 +498,12 @@ def _looks_like_one_outline(outlines) -> bool:
 
 def as_outlines(outlines, n_points: int = DEFAULT_POINTS) -> list[Outline]:
     """Validate a sequence of outlines (arrays or :class:`Outline`)."""
+    return [o for o, _ in _as_outlines(outlines, n_points)]
+
+
+def _as_outlines(outlines, n_points: int) -> list[tuple[Outline, tuple[float, float] | None]]:
+    """:func:`as_outlines`, each outline with its ``(jitter, left)`` where it was
+    smoothed as jagged (:func:`_make_outline`), without warnings (the caller notes)."""
     if _looks_like_one_outline(outlines):
         raise ValueError(
             "expected a list of outlines (one per view), got a single outline. "
