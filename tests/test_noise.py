@@ -1,0 +1,88 @@
+"""The outline noise model's moment matching (sorjax._noise) against the dense formula."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from sorjax import _noise as nz
+
+
+def _dense_moments(geo, J, ell_min, ell_max):
+    """The moments written out densely: the full projector Q, every grid value's S(ell)
+    built whole (unit_blocks) and contracted with the projected masks: (ells, m)."""
+    V, N = geo.a.shape
+    Uf, s, _ = np.linalg.svd(np.asarray(J), full_matrices=False)
+    Uf = Uf * (s > 1e-10 * s.max())[None, :]
+    U = Uf.reshape(V, N, -1)
+    # the full projector Q = I - U U^T, its diagonal blocks applied to block-diagonal P
+    Q = np.eye(V * N) - Uf @ Uf.T
+
+    def projected(P):
+        full = np.zeros((V * N, V * N))
+        for v in range(V):
+            full[v * N:(v + 1) * N, v * N:(v + 1) * N] = P[v]
+        QPQ = Q @ full @ Q
+        return np.stack([QPQ[v * N:(v + 1) * N, v * N:(v + 1) * N] for v in range(V)])
+
+    A = [projected(np.broadcast_to(np.eye(N), (V, N, N))), projected(np.asarray(geo.near)),
+         projected(np.asarray(geo.mirror))]
+    ells = np.geomspace(ell_min, ell_max, nz.N_ELL)
+    return ells, np.array([[np.sum(a * np.asarray(nz.unit_blocks(geo, ell))) for a in A] for ell in ells])
+
+
+def _dense_estimate(geo, r, J, ell_min, ell_max):
+    """The module's moment matching on the dense moments: ``(ell, sigma_n^2)``."""
+    ells, m = _dense_moments(geo, J, ell_min, ell_max)
+    r = np.asarray(r)
+    rr = np.sum(r**2)
+    emp = np.array([np.einsum("vn,vnm,vm->", r, geo.near, r), np.einsum("vn,vnm,vm->", r, geo.mirror, r)]) / rr
+    k = np.argmin(np.sum((m[:, 1:] / m[:, :1] - emp) ** 2, axis=1))
+    return ells[k], rr / m[k, 0]
+
+
+def _geometry(rng, V, N=100, M=2048, spacing=1.3):
+    a = rng.normal(size=(V, N))
+    w = (rng.random((V, N)) > 0.1).astype(float)
+    feet = (np.arange(N) * M / N + rng.normal(size=(V, N)) * 300) % M
+    geo = nz.noise_geometry(jnp.asarray(a), jnp.asarray(w), jnp.asarray(feet), jnp.full(V, spacing), M)
+    return geo, jnp.asarray(rng.normal(size=(V * N, 4 + 2 * V))), jnp.asarray(rng.normal(size=(V, N)) * 0.01)
+
+
+@pytest.mark.parametrize("V", [1, 3])
+def test_noise_moments_match_the_dense_formula(V):
+    rng = np.random.default_rng(10 + V)
+    for k in range(2):
+        geo, J, _ = _geometry(rng, V, spacing=0.7 + 2 * k)
+        ells, searched, m = jax.jit(nz.noise_moments)(geo, J, 0.25, 32.0)
+        ells_d, m_d = _dense_moments(geo, J, 0.25, 32.0)
+        np.testing.assert_allclose(ells, ells_d, rtol=1e-14)
+        # every grid value's moments, small ones included (relative to the largest)
+        np.testing.assert_allclose(m, m_d, rtol=1e-9, atol=1e-11 * np.max(np.abs(m_d)))
+
+
+@pytest.mark.parametrize("V", [1, 3])
+def test_estimate_noise_matches_the_dense_moments(V):
+    rng = np.random.default_rng(V)
+    est = jax.jit(nz.estimate_noise)
+    for k in range(3):
+        geo, J, r = _geometry(rng, V, spacing=0.7 + k)
+        # residuals with correlation: the noise smoothed along the outline (moments off 0)
+        r = jnp.asarray(np.apply_along_axis(lambda x: np.convolve(np.r_[x[-3:], x, x[:3]], np.ones(4) / 4, "same")
+                                            [3:-3], 1, np.asarray(r)))
+        ell, level = est(geo, r, J, 0.25, 32.0)
+        ell_d, level_d = _dense_estimate(geo, r, J, 0.25, 32.0)
+        assert float(ell) == pytest.approx(ell_d, rel=1e-12)
+        assert float(level) == pytest.approx(level_d, rel=1e-9)
+
+
+def test_ell_grid_quarter_octaves_down_from_the_largest():
+    ells, searched = nz.ell_grid(0.25, 32.0)
+    np.testing.assert_allclose(ells, np.geomspace(0.25, 32.0, nz.N_ELL), rtol=1e-14)
+    assert bool(jnp.all(searched))
+    ells, searched = nz.ell_grid(1.0, 8.0)  # a narrower range: the grid's lower part left out
+    assert float(ells[-1]) == 8.0 and float(jnp.min(ells[searched])) == pytest.approx(1.0)
+    assert int(jnp.sum(searched)) == 13
+    geo, J, r = _geometry(np.random.default_rng(0), 2)
+    ell, _ = nz.estimate_noise(geo, r, J, 1.0, 8.0)
+    assert 1.0 - 1e-12 <= float(ell) <= 8.0
