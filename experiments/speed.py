@@ -12,7 +12,9 @@ One run prints, on this machine:
    explicitly on the first chunk, so the wall time splits into trace, compile, the
    chunks' compute and the host's share (drawing the noisy outlines, the records).
    The warm cost of a trial is a chunk's compute time over its trials (the median
-   over the chunks; with fewer than 3 chunks the first chunk is run again).
+   over the chunks; with fewer than 3 chunks the first chunk is run again): wall
+   time, with the chunk split over the CPU cores (:class:`sorjax.core.TrialSharder`'s
+   host threads), while the floor below is one core's.
 2. **The baseline.**  A plain numpy + ``scipy.optimize.least_squares`` implementation
    of the same estimators (eq. 20: distance from the transferred samples to the
    outline polyline, nearest vertex by a k-d tree then its two segments; per-view
@@ -114,18 +116,18 @@ class _TimedProgram:
     def run(self, pts):
         import jax
 
-        n, args = self.sharder.place(pts)
+        n, parts = self.sharder.split(pts)  # the parts run side by side (host threads) on one CPU device
         if self.compiled is None:
             t0 = time.perf_counter()
-            lowered = self.sharder.batched.lower(*args)
+            lowered = self.sharder.batched.lower(*parts[0])
             t1 = time.perf_counter()
             self.compiled = lowered.compile()
             self.lower_s, self.compile_s = t1 - t0, time.perf_counter() - t1
         t0 = time.perf_counter()
-        out = self.compiled(*args)
+        out = self.sharder.run_parts(self.compiled, parts)
         jax.block_until_ready(out)
         dt = time.perf_counter() - t0
-        if -n % self.sharder.n_devices:
+        if jax.tree.leaves(out)[0].shape[0] != n:
             out = jax.tree.map(lambda y: y[:n], out)
         return out, dt
 

@@ -10,6 +10,7 @@ import sys
 import textwrap
 
 import numpy as np
+import pytest
 
 # 5 randomly perturbed circles (an odd count: padded to 6 on 2 devices), their fields
 # and the signed distances of fixed probe points: sorjax._field.setup +
@@ -76,3 +77,38 @@ def test_trials_sharded_over_two_devices_equal_one_device():
         np.testing.assert_allclose(np.asarray(two[key]), np.asarray(one[key]), rtol=0, atol=1e-12)
     np.testing.assert_allclose(np.asarray(two["even_d"]), np.asarray(two["d"])[:4], rtol=0, atol=1e-12)
     assert np.abs(np.asarray(one["d"])).max() > 1.0  # non-trivial numbers
+
+
+def test_host_threads_split_gives_the_same_numbers():
+    """On one CPU device the batch runs as equal parts side by side from host threads:
+    every trial's numbers as one loop gives them, padding dropped, one executable."""
+    import jax
+    import jax.numpy as jnp
+
+    from sorjax import core
+    from sorjax._field import setup, signed_distances
+
+    jax.config.update("jax_enable_x64", True)
+    rng = np.random.default_rng(5)
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    circles = np.stack([(r * (1 + 0.03 * np.sin(2 * t + ph)))[:, None] * np.stack([np.cos(t), np.sin(t)], -1)
+                        for r, ph in zip(rng.uniform(40, 90, 7), rng.uniform(0, 6, 7))])
+    probes = jnp.asarray(rng.normal(0, 60, (9, 2)))
+
+    def trial(points):
+        field, _, _ = setup(points, 20)
+        return signed_distances(field, probes)
+
+    one = core.TrialSharder(trial, batch="map", threads=1)
+    three = core.TrialSharder(trial, batch="map", threads=3)
+    assert one.threads == 1 and three.threads == 3
+    n, parts = three.split(circles)  # 7 trials: 3 parts of 3, the last padded
+    assert n == 7 and [p[0].shape[0] for p in parts] == [3, 3, 3]
+    a, b = np.asarray(one(circles)), np.asarray(three(circles))
+    assert a.shape == b.shape == (7, 9)
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(np.asarray(three(circles[:2])), a[:2])  # fewer trials than threads
+    assert len(three._executables) == 2  # one per part shape
+    assert np.abs(a).max() > 1.0
+    with pytest.raises(ValueError, match="threads"):
+        core.TrialSharder(trial, batch="map", threads=0)

@@ -23,7 +23,9 @@ changes.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import jax
@@ -31,6 +33,15 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 TRIALS = "trials"
+
+
+def host_threads() -> int:
+    """The CPU cores this process may run on (its affinity mask where the system has
+    one): how many parts :class:`TrialSharder` splits a batch into on one CPU device."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
 
 
 class TrialSharder:
@@ -51,13 +62,22 @@ class TrialSharder:
     divides evenly the outputs stay sharded over the trials; otherwise dropping the
     padding gathers them onto every device (replicated; results are small).
 
-    The vmapped, jitted function is built once, here, and held by this object: it is
-    compiled once per input shape and dtype (``jax.jit``'s own cache, which lives as
-    long as this object's callable).  Keep the object for repeated studies; building a
-    new one (or calling :func:`sharded_vmap`) traces and compiles again.
+    On one CPU device (``batch="map"``, the default there) the trials run one after
+    another in a compiled loop (``jax.lax.map``), and the batch is split into
+    ``threads`` equal parts (default :func:`host_threads`: the cores this process may
+    use) run side by side from host threads: XLA's CPU runtime runs one execution
+    mostly on one core, so two parts on two cores finish a Table 1 chunk about 1.5x
+    sooner (measured on 2 cores).  Each trial's numbers are the same whatever the split
+    (the same loop body; tested).
+
+    The vmapped (or mapped), jitted function is built once, here, and held by this
+    object, with one executable per input shape and dtype of a part (traced and
+    compiled on first use, then reused).  Keep the object for repeated studies;
+    building a new one (or calling :func:`sharded_vmap`) traces and compiles again.
     """
 
-    def __init__(self, fn: Callable[..., Any], devices: Sequence[jax.Device] | None = None, batch: str | None = None):
+    def __init__(self, fn: Callable[..., Any], devices: Sequence[jax.Device] | None = None, batch: str | None = None,
+                 threads: int | None = None):
         self.devices = tuple(jax.devices() if devices is None else devices)
         if batch is None:
             batch = "map" if jax.default_backend() == "cpu" and len(self.devices) == 1 else "vmap"
@@ -66,7 +86,12 @@ class TrialSharder:
         if batch == "map" and len(self.devices) > 1:
             raise ValueError("batch='map' runs on one device (optimistix's solvers do not run inside "
                              "jax.shard_map); use batch='vmap' to shard trials over several devices")
+        if threads is not None and (int(threads) != threads or threads < 1):
+            raise ValueError(f"threads must be a positive integer; got {threads!r}")
         self.fn, self.batch = fn, batch
+        self.threads = (host_threads() if threads is None else int(threads)) if batch == "map" else 1
+        self._executables: dict = {}
+        self._pool: ThreadPoolExecutor | None = None
         self.mesh = Mesh(np.asarray(self.devices, dtype=object), (TRIALS,))
         self.sharding = NamedSharding(self.mesh, PartitionSpec(TRIALS))
         if batch == "vmap":
@@ -78,9 +103,51 @@ class TrialSharder:
     def n_devices(self) -> int:
         return len(self.devices)
 
-    def place(self, *batched_args):
+    def place(self, *batched_args, multiple: int | None = None):
         """``(n, padded_args)``: the arguments with the trial axis padded to a multiple
-        of the device count (repeating the last trial) and sharded over the mesh."""
+        of ``multiple`` (default: the device count) by repeating the last trial, and
+        sharded over the mesh."""
+        n = self._count(batched_args)
+        return n, jax.tree.map(self._put, self._padded(batched_args, n, multiple or self.n_devices))
+
+    def split(self, *batched_args):
+        """``(n, parts)``: the arguments padded (repeating the last trial) and cut into
+        equal parts along the trial axis, each placed on the mesh: ``threads`` parts on
+        one CPU device (fewer for a small batch), else one."""
+        n = self._count(batched_args)
+        k = min(self.threads, n)
+        padded = self._padded(batched_args, n, k * self.n_devices)
+        size = -(-n // (k * self.n_devices)) * self.n_devices
+        return n, [jax.tree.map(lambda x: self._put(x[i * size:(i + 1) * size]), padded) for i in range(k)]
+
+    def executable(self, *part):
+        """The compiled program for a part's shapes (traced and compiled on first use)."""
+        key = tuple((np.shape(x), np.result_type(x)) for x in jax.tree.leaves(part)), jax.tree.structure(part)
+        if key not in self._executables:
+            self._executables[key] = self.batched.lower(*part).compile()
+        return self._executables[key]
+
+    def run_parts(self, exe, parts):
+        """``exe`` on every part (side by side from host threads when there are several),
+        the outputs concatenated along the trial axis."""
+        if len(parts) == 1:
+            return exe(*parts[0])
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(max_workers=self.threads, thread_name_prefix="sorjax-trials")
+        outs = list(self._pool.map(lambda p: jax.block_until_ready(exe(*p)), parts))
+        return jax.tree.map(lambda *xs: jax.numpy.concatenate(xs, axis=0), *outs)
+
+    def __call__(self, *batched_args):
+        """``fn`` of every trial, stacked: a pytree whose leaves have the trial axis
+        (length ``n``, padding dropped) first."""
+        n, parts = self.split(*batched_args)
+        out = self.run_parts(self.executable(*parts[0]), parts)
+        if jax.tree.leaves(out) and jax.tree.leaves(out)[0].shape[0] != n:
+            out = jax.tree.map(lambda y: y[:n], out)
+        return out
+
+    @staticmethod
+    def _count(batched_args) -> int:
         leaves = jax.tree.leaves(batched_args)
         if not leaves:
             raise ValueError("TrialSharder needs at least one array with a leading trial axis")
@@ -90,24 +157,20 @@ class TrialSharder:
         (n,) = sizes
         if n == 0:
             raise ValueError("no trials")
-        pad = -n % self.n_devices
+        return n
 
-        def put(x):
+    @staticmethod
+    def _padded(batched_args, n: int, multiple: int):
+        pad = -n % multiple
+
+        def one(x):
             x = np.asarray(x)
-            if pad:
-                x = np.concatenate([x, np.repeat(x[-1:], pad, axis=0)], axis=0)
-            return jax.make_array_from_callback(x.shape, self.sharding, lambda index: x[index])
+            return np.concatenate([x, np.repeat(x[-1:], pad, axis=0)], axis=0) if pad else x
 
-        return n, jax.tree.map(put, batched_args)
+        return jax.tree.map(one, batched_args)
 
-    def __call__(self, *batched_args):
-        """``fn`` of every trial, stacked: a pytree whose leaves have the trial axis
-        (length ``n``, padding dropped) first."""
-        n, args = self.place(*batched_args)
-        out = self.batched(*args)
-        if -n % self.n_devices:
-            out = jax.tree.map(lambda y: y[:n], out)
-        return out
+    def _put(self, x):
+        return jax.make_array_from_callback(x.shape, self.sharding, lambda index: x[index])
 
 
 def sharded_vmap(fn: Callable[..., Any], *batched_args):
