@@ -8,9 +8,10 @@ One run prints, on this machine:
    own pieces (:func:`sorjax.experiment._trials.run_batch` with a
    :class:`~sorjax.experiment._trials.TrialProgram`), in this process, with a fresh
    compilation cache (a temporary ``SORJAX_CACHE``; ``--warm-cache`` keeps the
-   user's).  The program is traced (``jit.lower``) and compiled (``.compile()``)
-   explicitly on the first chunk, so the wall time splits into trace, compile, the
-   chunks' compute and the host's share (drawing the noisy outlines, the records).
+   user's).  The program's two stages (the per-view fits, the methods) are traced
+   (``jit.lower``) one after the other and compiled (``.compile()``) side by side on
+   the first chunk, so the wall time splits into trace, compile, the chunks' compute
+   and the host's share (drawing the noisy outlines, the records).
    The warm cost of a trial is a chunk's compute time over its trials (the median
    over the chunks; with fewer than 3 chunks the first chunk is run again): wall
    time, with the chunk split over the CPU cores (:class:`sorjax.core.TrialSharder`'s
@@ -104,7 +105,6 @@ class _TimedProgram:
 
     def __init__(self, program):
         self.program = program
-        self.sharder = program._sharder
         self.compiled = None
         self.lower_s = self.compile_s = 0.0
         self.chunks: list[tuple[int, float]] = []  # (trials computed, seconds)
@@ -116,15 +116,12 @@ class _TimedProgram:
     def run(self, pts):
         import jax
 
-        n, parts = self.sharder.split(pts)  # the parts run side by side (host threads) on one CPU device
+        n, parts = self.program.split(pts)  # the parts run side by side (host threads) on one CPU device
         if self.compiled is None:
-            t0 = time.perf_counter()
-            lowered = self.sharder.batched.lower(*parts[0])
-            t1 = time.perf_counter()
-            self.compiled = lowered.compile()
-            self.lower_s, self.compile_s = t1 - t0, time.perf_counter() - t1
+            self.compiled = self.program.executables(parts[0])  # both stages traced, then compiled together
+            self.lower_s, self.compile_s = self.program.lower_s, self.program.compile_s
         t0 = time.perf_counter()
-        out = self.sharder.run_parts(self.compiled, parts)
+        out = self.program.run_parts(parts)
         jax.block_until_ready(out)
         dt = time.perf_counter() - t0
         if jax.tree.leaves(out)[0].shape[0] != n:

@@ -17,6 +17,7 @@ from ._checks import ModelChecks as ModelChecks
 from ._options import Options as Options
 from ._prepare import Views as Views, joint_transform as joint_transform, prepare_views as prepare_views
 from ._result import RESULTS as RESULTS, CoreResult as CoreResult
-from ._shard import TrialSharder as TrialSharder, sharded_vmap as sharded_vmap
+from ._shard import TrialSharder as TrialSharder, compile_together as compile_together
+from ._shard import host_threads as host_threads, sharded_vmap as sharded_vmap
 from ._viewfit import ViewFit as ViewFit, ViewHomologies as ViewHomologies, fit_view as fit_view
 from ._viewfit import fit_views as fit_views, homologies_in_pixels as homologies_in_pixels

@@ -120,12 +120,26 @@ class TrialSharder:
         size = -(-n // (k * self.n_devices)) * self.n_devices
         return n, [jax.tree.map(lambda x: self._put(x[i * size:(i + 1) * size]), padded) for i in range(k)]
 
+    @staticmethod
+    def _key(part):
+        return tuple((np.shape(x), np.result_type(x.dtype)) for x in jax.tree.leaves(part)), jax.tree.structure(part)
+
     def executable(self, *part):
-        """The compiled program for a part's shapes (traced and compiled on first use)."""
-        key = tuple((np.shape(x), np.result_type(x)) for x in jax.tree.leaves(part)), jax.tree.structure(part)
+        """The compiled program for a part's shapes (traced and compiled on first use;
+        ``part`` may hold :class:`jax.ShapeDtypeStruct` leaves)."""
+        key = self._key(part)
         if key not in self._executables:
             self._executables[key] = self.batched.lower(*part).compile()
         return self._executables[key]
+
+    def lower(self, *part):
+        """The traced program for a part's shapes (``jax.jit(...).lower``), to compile
+        with :func:`compile_together` and :meth:`adopt`."""
+        return self.batched.lower(*part)
+
+    def adopt(self, part, compiled) -> None:
+        """Use ``compiled`` (the compiled :meth:`lower` of ``part``) for ``part``'s shapes."""
+        self._executables[self._key(part)] = compiled
 
     def run_parts(self, exe, parts):
         """``exe`` on every part (side by side from host threads when there are several),
@@ -171,6 +185,16 @@ class TrialSharder:
 
     def _put(self, x):
         return jax.make_array_from_callback(x.shape, self.sharding, lambda index: x[index])
+
+
+def compile_together(lowered: Sequence[Any]) -> list[Any]:
+    """Compile several traced programs (``jax.stages.Lowered``) side by side from host
+    threads: XLA compiles one program mostly on one core, so a study split into
+    stages compiles in about the time of its largest stage."""
+    if len(lowered) <= 1:
+        return [lo.compile() for lo in lowered]
+    with ThreadPoolExecutor(max_workers=min(len(lowered), host_threads())) as pool:
+        return list(pool.map(lambda lo: lo.compile(), lowered))
 
 
 def sharded_vmap(fn: Callable[..., Any], *batched_args):

@@ -111,25 +111,68 @@ def options_for(cfg: Config) -> core.Options:
 class TrialProgram:
     """The compiled program of a config: ``points (B, V, M, 2) -> (homologies,
     {method: CoreResult})`` with a leading trial axis, sharded over the devices.
-    One compilation per shape; reuse the instance for every chunk of a run."""
+
+    Two stages, each one compiled program per shape: the per-view fits
+    (:func:`sorjax.core.fit_homologies`) and every method on them
+    (:func:`sorjax.core.calibrate_methods`).  Both are traced on the first chunk and
+    compiled side by side (:func:`sorjax.core.compile_together`: XLA compiles one
+    program on one core); on one CPU device each chunk's parts run side by side from
+    host threads, fits then methods (:class:`sorjax.core.TrialSharder`).  Reuse the
+    instance for every chunk of a run."""
 
     def __init__(self, cfg: Config):
         self.methods = tuple(cfg.methods)
-        self.options = options_for(cfg)
-        options = self.options
+        self.options = options = options_for(cfg)
         names = tuple(_method_args(m)[0] for m in self.methods)
         aspects = np.array([_method_args(m)[1] for m in self.methods])
         sequential = jax.default_backend() == "cpu" and len(jax.devices()) == 1  # core.TrialSharder's ``batch``
+        self.fits = core.TrialSharder(lambda points: core.fit_homologies(points, options, sequential))
+        self.calibrations = core.TrialSharder(
+            lambda points, homs: dict(zip(self.methods, core.calibrate_methods(points, homs, names, aspects,
+                                                                               options=options))))
+        self.lower_s = self.compile_s = 0.0  # the last new shape's tracing and compilation (s)
+        self._homs: dict = {}  # a part's shapes -> the fits' output shapes
 
-        def one(points):
-            homs = core.fit_homologies(points, options, sequential)
-            res = core.calibrate_methods(points, homs, names, aspects, options=options)
-            return homs, dict(zip(self.methods, res))
+    def split(self, points: np.ndarray):
+        """``(n, parts)`` of a chunk (:meth:`sorjax.core.TrialSharder.split`)."""
+        return self.fits.split(points)
 
-        self._sharder = core.TrialSharder(one)
+    def executables(self, part):
+        """The two stages' compiled programs for a part's shapes: traced one after the
+        other, compiled together, on first use (timed: :attr:`lower_s`,
+        :attr:`compile_s`)."""
+        key = core.TrialSharder._key(part)
+        if key not in self._homs:
+            t0 = time.perf_counter()
+            fits = self.fits.lower(*part)
+            homs = jax.tree.map(lambda o: jax.ShapeDtypeStruct(o.shape, o.dtype, sharding=self.fits.sharding),
+                                fits.out_info)
+            cals = self.calibrations.lower(*part, homs)
+            t1 = time.perf_counter()
+            exes = core.compile_together([fits, cals])
+            self.fits.adopt(part, exes[0])
+            self.calibrations.adopt((*part, homs), exes[1])
+            self._homs[key] = homs
+            self.lower_s, self.compile_s = t1 - t0, time.perf_counter() - t1
+        return self.fits.executable(*part), self.calibrations.executable(*part, self._homs[key])
+
+    def run_parts(self, parts):
+        """Both stages on every part (side by side from host threads when there are
+        several), concatenated along the trial axis."""
+        fit, cal = self.executables(parts[0])
+
+        def both(*p):
+            homs = fit(*p)
+            return homs, cal(*p, homs)
+
+        return self.fits.run_parts(both, parts)
 
     def __call__(self, points: np.ndarray):
-        return self._sharder(points)
+        n, parts = self.split(points)
+        out = self.run_parts(parts)
+        if jax.tree.leaves(out)[0].shape[0] != n:
+            out = jax.tree.map(lambda y: y[:n], out)
+        return out
 
 
 def records_from(cfg: Config, recs: list[dict], homs, results: dict, seconds: float) -> None:
