@@ -86,3 +86,15 @@ def test_ell_grid_quarter_octaves_down_from_the_largest():
     geo, J, r = _geometry(np.random.default_rng(0), 2)
     ell, _ = nz.estimate_noise(geo, r, J, 1.0, 8.0)
     assert 1.0 - 1e-12 <= float(ell) <= 8.0
+
+
+def test_estimate_noise_under_vmap_equals_single_calls():
+    rng = np.random.default_rng(7)
+    cases = [_geometry(rng, 2, spacing=0.8 + k) for k in range(3)]
+    geo = jax.tree.map(lambda *x: jnp.stack(x), *[c[0] for c in cases])
+    J, r = jnp.stack([c[1] for c in cases]), jnp.stack([c[2] for c in cases])
+    ell_v, level_v = jax.jit(jax.vmap(lambda g, r, J: nz.estimate_noise(g, r, J, 0.25, 32.0)))(geo, r, J)
+    for k, (g, Jk, rk) in enumerate(cases):
+        ell, level = nz.estimate_noise(g, rk, Jk, 0.25, 32.0)
+        assert float(ell_v[k]) == float(ell)
+        assert float(level_v[k]) == pytest.approx(float(level), rel=1e-12)

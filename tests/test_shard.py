@@ -110,5 +110,6 @@ def test_host_threads_split_gives_the_same_numbers():
     np.testing.assert_array_equal(np.asarray(three(circles[:2])), a[:2])  # fewer trials than threads
     assert len(three._executables) == 2  # one per part shape
     assert np.abs(a).max() > 1.0
-    with pytest.raises(ValueError, match="threads"):
-        core.TrialSharder(trial, batch="map", threads=0)
+    for bad in (0, 1.5, "2", True):
+        with pytest.raises(ValueError, match="threads must be a positive integer"):
+            core.TrialSharder(trial, batch="map", threads=bad)

@@ -86,8 +86,10 @@ class TrialSharder:
         if batch == "map" and len(self.devices) > 1:
             raise ValueError("batch='map' runs on one device (optimistix's solvers do not run inside "
                              "jax.shard_map); use batch='vmap' to shard trials over several devices")
-        if threads is not None and (int(threads) != threads or threads < 1):
-            raise ValueError(f"threads must be a positive integer; got {threads!r}")
+        if threads is not None and (isinstance(threads, bool) or not isinstance(threads, (int, np.integer))
+                                    or threads < 1):
+            raise ValueError(f"threads must be a positive integer (parts run side by side on one CPU device); "
+                             f"got {threads!r}")
         self.fn, self.batch = fn, batch
         self.threads = (host_threads() if threads is None else int(threads)) if batch == "map" else 1
         self._executables: dict = {}
@@ -121,13 +123,21 @@ class TrialSharder:
         return n, [jax.tree.map(lambda x: self._put(x[i * size:(i + 1) * size]), padded) for i in range(k)]
 
     @staticmethod
-    def _key(part):
+    def shape_key(part):
+        """What one executable serves: the shapes and dtypes of a part's leaves (arrays
+        or :class:`jax.ShapeDtypeStruct`) and its tree structure."""
         return tuple((np.shape(x), np.result_type(x.dtype)) for x in jax.tree.leaves(part)), jax.tree.structure(part)
+
+    @staticmethod
+    def trimmed(out, n: int):
+        """``out`` (leading trial axis) without the padding trials beyond the first ``n``."""
+        leaves = jax.tree.leaves(out)
+        return jax.tree.map(lambda y: y[:n], out) if leaves and leaves[0].shape[0] != n else out
 
     def executable(self, *part):
         """The compiled program for a part's shapes (traced and compiled on first use;
         ``part`` may hold :class:`jax.ShapeDtypeStruct` leaves)."""
-        key = self._key(part)
+        key = self.shape_key(part)
         if key not in self._executables:
             self._executables[key] = self.batched.lower(*part).compile()
         return self._executables[key]
@@ -139,7 +149,7 @@ class TrialSharder:
 
     def adopt(self, part, compiled) -> None:
         """Use ``compiled`` (the compiled :meth:`lower` of ``part``) for ``part``'s shapes."""
-        self._executables[self._key(part)] = compiled
+        self._executables[self.shape_key(part)] = compiled
 
     def run_parts(self, exe, parts):
         """``exe`` on every part (side by side from host threads when there are several),
@@ -155,10 +165,7 @@ class TrialSharder:
         """``fn`` of every trial, stacked: a pytree whose leaves have the trial axis
         (length ``n``, padding dropped) first."""
         n, parts = self.split(*batched_args)
-        out = self.run_parts(self.executable(*parts[0]), parts)
-        if jax.tree.leaves(out) and jax.tree.leaves(out)[0].shape[0] != n:
-            out = jax.tree.map(lambda y: y[:n], out)
-        return out
+        return self.trimmed(self.run_parts(self.executable(*parts[0]), parts), n)
 
     @staticmethod
     def _count(batched_args) -> int:

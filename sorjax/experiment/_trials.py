@@ -141,7 +141,7 @@ class TrialProgram:
         """The two stages' compiled programs for a part's shapes: traced one after the
         other, compiled together, on first use (timed: :attr:`lower_s`,
         :attr:`compile_s`)."""
-        key = core.TrialSharder._key(part)
+        key = core.TrialSharder.shape_key(part)
         if key not in self._homs:
             t0 = time.perf_counter()
             fits = self.fits.lower(*part)
@@ -169,10 +169,7 @@ class TrialProgram:
 
     def __call__(self, points: np.ndarray):
         n, parts = self.split(points)
-        out = self.run_parts(parts)
-        if jax.tree.leaves(out)[0].shape[0] != n:
-            out = jax.tree.map(lambda y: y[:n], out)
-        return out
+        return core.TrialSharder.trimmed(self.run_parts(parts), n)
 
 
 def records_from(cfg: Config, recs: list[dict], homs, results: dict, seconds: float) -> None:
