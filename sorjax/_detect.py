@@ -30,10 +30,12 @@ size plus ``polygon_px``, the rounding of its corners by blur and segmentation: 
 a box face, a wallpaper pattern, which are symmetric too).  A surface of
 revolution's outline does (a mug's handle is trimmed); a leak into the background, two
 objects merged, a box or other clutter do not.  A kept segmentation whose fit trimmed
-more than ``1 - recut_inliers`` of its outline is cut again by its own symmetry
+more than ``1 - recut_inliers`` of its outline, and one refused as a leak (symmetric
+once trimmed, but not before), is cut again by its own symmetry
 (:func:`symmetric_recut`): where the region and its mirror image under the fitted
 homology disagree, GrabCut starts from background, so that a one-sided leak (a
-shadow, a patch of table) that the trimming forgave is dropped.  Of symmetric segmentations
+shadow, a patch of table) or bite is dropped or filled by the colours, and the judge
+looks again.  Of symmetric segmentations
 that overlap (by more than ``overlap`` of the smaller) the largest is kept: a part of an
 object (one bulb of a lying vase) may be symmetric too.  Each proposal dropped that
 overlaps no kept object is reported with its reason.
@@ -343,13 +345,19 @@ def symmetry_of(fg: np.ndarray, offset=(0, 0)):
     return p, h
 
 
+def symmetry_limit(p, o: DetectOptions) -> float:
+    """The largest trimmed RMS symmetry residual (px) of a kept outline ``p``:
+    ``symmetry_px``, or ``symmetry_rel`` of its larger extent when larger."""
+    return max(o.symmetry_px, o.symmetry_rel * float(np.max(np.max(p, 0) - np.min(p, 0))))
+
+
 def judge(p, h, o: DetectOptions) -> tuple[bool, str, float]:
     """Whether the outline ``p`` with its fitted homology ``h`` is a surface of
     revolution's: ``(ok, reason if not, trimmed RMS residual px)``."""
     if h is None:
         return False, "no homology could be fitted to its outline", math.inf
     size = float(np.max(p.max(0) - p.min(0)))
-    limit = max(o.symmetry_px, o.symmetry_rel * size)
+    limit = symmetry_limit(p, o)
     tol = o.polygon_rel * size + o.polygon_px
     poly = cv2.approxPolyDP(np.asarray(p, np.float32).reshape(-1, 1, 2), tol, True)
     if len(poly) <= o.polygon_vertices:
@@ -397,12 +405,12 @@ def symmetric_recut(sm: np.ndarray, win, fg: np.ndarray, hom, iterations: int, o
     background, the rest as background, so that only the colours put a one-sided part
     back.  The new segmentation is taken when :func:`judge` keeps it and, for a region
     the judge had kept (``judged_ok``), its untrimmed residual is at most ``recut_gain``
-    times the old one.  Tried only when the fit trimmed more than ``1 -
+    times the old one; a kept region is tried only when its fit trimmed more than ``1 -
     recut_inliers`` of the outline."""
     from ._extract import _dilate, _erode, _grabcut, _largest_component
 
     raw0 = float(hom.rms_untrimmed)
-    if hom.inliers is None or float(np.mean(np.asarray(hom.inliers))) >= o.recut_inliers:
+    if judged_ok and (hom.inliers is None or float(np.mean(np.asarray(hom.inliers))) >= o.recut_inliers):
         return None
     x0, y0, x1, y1 = win
     m = mirrored(fg, np.asarray(hom.W), (x0, y0))
@@ -427,6 +435,24 @@ def symmetric_recut(sm: np.ndarray, win, fg: np.ndarray, hom, iterations: int, o
     if not ok or (judged_ok and float(h.rms_untrimmed) > o.recut_gain * raw0):
         return None
     return new, rms
+
+
+def _judge_or_recut(sm, win, fg, iterations: int, o: DetectOptions):
+    """``(ok, reason if not, segmentation, trimmed RMS residual px)`` of the region
+    ``fg`` in the window ``win`` of the reduced image ``sm``: :func:`judge`, and
+    :func:`symmetric_recut` for a region that is symmetric once trimmed (kept, or
+    refused as a leak).  Regions further from symmetric are not re-cut: on the photo
+    sets that found no object more and added fragments of objects (a bowl's halves
+    between its painted bands)."""
+    p, hom = symmetry_of(fg, win[:2])
+    if p is None:
+        return False, "no outline", fg, math.inf
+    ok, why, rms = judge(p, hom, o)
+    if hom is not None and np.isfinite(rms) and rms <= symmetry_limit(p, o):
+        cut = symmetric_recut(sm, win, fg, hom, iterations, o, judged_ok=ok)
+        if cut is not None:
+            return True, "", cut[0], cut[1]
+    return ok, why, fg, rms
 
 
 def _mask_iou(a, b, smaller: bool = False) -> float:
@@ -505,7 +531,6 @@ def find_objects(img: np.ndarray, *, iterations: int, min_area: float, o: Detect
                     max(0, pbox[1] - int(o.grow_step * bh)) if "top" in cut else pbox[1],
                     min(w - 1, pbox[2] + int(o.grow_step * bw)) if "right" in cut else pbox[2],
                     min(h - 1, pbox[3] + int(o.grow_step * bh)) if "bottom" in cut else pbox[3])
-        cx0, cy0 = win[:2]
         if fg.sum() < area_min:
             dropped.append((win, None, f"a region at {where}: GrabCut found no object in it"))
             continue
@@ -513,19 +538,11 @@ def find_objects(img: np.ndarray, *, iterations: int, min_area: float, o: Detect
             dropped.append((win, fg, f"a region at {where}: its segmentation runs out of the region "
                                      f"({', '.join(cut)}): part of a larger region, or background"))
             continue
-        p, hom = symmetry_of(fg, (cx0, cy0))
-        if p is None:
-            dropped.append((win, fg, f"a region at {where}: no outline"))
-            continue
-        ok, why, rms = judge(p, hom, o)
-        if ok or (hom is not None and rms <= max(o.symmetry_px, o.symmetry_rel * float(np.max(p.max(0) - p.min(0))))):
-            # symmetric, or symmetric once trimmed (a leak the judge refused): cut by its symmetry
-            cut = symmetric_recut(sm, win, fg, hom, iterations, o, judged_ok=ok)
-            if cut is not None:
-                (fg, rms), ok = cut, True
+        ok, why, fg, rms = _judge_or_recut(sm, win, fg, iterations, o)
         if not ok:
             dropped.append((win, fg, f"a region at {where}: {why}"))
             continue
+        cx0, cy0 = win[:2]
         judged.append((rms, win, fg))
         ys, xs = np.nonzero(fg)
         accepted.append((xs.min() + cx0, ys.min() + cy0, xs.max() + cx0, ys.max() + cy0))
