@@ -77,6 +77,8 @@ confirmed).
 from __future__ import annotations
 
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
@@ -298,10 +300,14 @@ def proposals(sm: np.ndarray, iterations: int, o: DetectOptions) -> list:
     band = max(5, int(round(o.border_frac * min(h, w))))
     lab = cv2.cvtColor(sm, cv2.COLOR_BGR2LAB).astype(np.float64)
     found: list = []
-    _cue_border(sm, band, iterations, o, found)
-    _cue_saliency(lab, band, o, found)
-    _cue_colour(sm, lab, band, o, found)
-    _cue_smooth(sm, band, o, found)
+    border: list = []
+    with ThreadPoolExecutor(max_workers=1) as ex:  # the border cue's GrabCut beside the other cues
+        job = ex.submit(_cue_border, sm, band, iterations, o, border)
+        _cue_saliency(lab, band, o, found)
+        _cue_colour(sm, lab, band, o, found)
+        _cue_smooth(sm, band, o, found)
+        job.result()
+    found = border + found
     found.sort(key=lambda f: -f[2])
     kept: list = []
     for cue, box, _ in found:
@@ -500,7 +506,8 @@ def _segment_region(sm: np.ndarray, pbox, iterations: int, o: DetectOptions):
     return win, fg, cut
 
 
-def find_objects(img: np.ndarray, *, iterations: int, min_area: float, o: DetectOptions):
+def find_objects(img: np.ndarray, *, iterations: int, min_area: float, o: DetectOptions,
+                 threads: int | None = None):
     """Surfaces of revolution in the uint8 BGR image ``img``, found with no boxes, on
     the image reduced to at most ``max_side`` px (scale ``s``).
 
@@ -509,16 +516,15 @@ def find_objects(img: np.ndarray, *, iterations: int, min_area: float, o: Detect
     segmentation there and ``symmetry_rms`` its outline's symmetry residual (reduced
     px), most symmetric first; ``notes`` one line per proposal dropped that overlaps no
     kept object, saying why (proposals in which GrabCut kept nothing are not named: a
-    patch of the background)."""
+    patch of the background).  ``threads``: proposals segmented side by side (None: one
+    per CPU core); the result does not depend on it."""
     sm, s = _reduce(img, o.max_side)
     h, w = sm.shape[:2]
     area_min = max(min_area * s * s, 16.0)
-    judged = []  # (rms, window, fg)
-    dropped = []  # (window, fg or None, note)
-    accepted = []  # boxes of the segmentations judged symmetric
-    for cue, pbox in proposals(sm, iterations, o):
-        if any(_box_iou(pbox, b) > o.same_iou for b in accepted):
-            continue  # a kept object seen again by another cue
+
+    def look(proposal):
+        """``(window, fg or None, why it was dropped or its trimmed RMS residual)`` of one proposal."""
+        cue, pbox = proposal
         where = (f"x {pbox[0] / s:.0f}..{(pbox[2] + 1) / s - 1:.0f}, y {pbox[1] / s:.0f}..{(pbox[3] + 1) / s - 1:.0f} "
                  f"({cue} cue)")
         for _ in range(o.grow_rounds + 1):
@@ -532,18 +538,33 @@ def find_objects(img: np.ndarray, *, iterations: int, min_area: float, o: Detect
                     min(w - 1, pbox[2] + int(o.grow_step * bw)) if "right" in cut else pbox[2],
                     min(h - 1, pbox[3] + int(o.grow_step * bh)) if "bottom" in cut else pbox[3])
         if fg.sum() < area_min:
-            dropped.append((win, None, f"a region at {where}: GrabCut found no object in it"))
-            continue
+            return win, None, f"a region at {where}: GrabCut found no object in it"
         if cut:
-            dropped.append((win, fg, f"a region at {where}: its segmentation runs out of the region "
-                                     f"({', '.join(cut)}): part of a larger region, or background"))
-            continue
+            return win, fg, (f"a region at {where}: its segmentation runs out of the region ({', '.join(cut)}): "
+                             "part of a larger region, or background")
         ok, why, fg, rms = _judge_or_recut(sm, win, fg, iterations, o)
-        if not ok:
-            dropped.append((win, fg, f"a region at {where}: {why}"))
+        return win, fg, (rms if ok else f"a region at {where}: {why}")
+
+    # each proposal is segmented and judged on its own, side by side (OpenCV's GrabCut
+    # releases the GIL); the proposals are then taken in order as before
+    props = proposals(sm, iterations, o)
+    workers = max(1, min(len(props), threads if threads is not None else (os.cpu_count() or 1)))
+    if workers > 1:
+        with ThreadPoolExecutor(max_workers=workers) as ex:
+            looks = list(ex.map(look, props))
+    else:
+        looks = [look(pr) for pr in props]
+    judged = []  # (rms, window, fg)
+    dropped = []  # (window, fg or None, note)
+    accepted = []  # boxes of the segmentations judged symmetric
+    for (cue, pbox), (win, fg, res) in zip(props, looks):
+        if any(_box_iou(pbox, b) > o.same_iou for b in accepted):
+            continue  # a kept object seen again by another cue
+        if isinstance(res, str):
+            dropped.append((win, fg, res))
             continue
         cx0, cy0 = win[:2]
-        judged.append((rms, win, fg))
+        judged.append((res, win, fg))
         ys, xs = np.nonzero(fg)
         accepted.append((xs.min() + cx0, ys.min() + cy0, xs.max() + cx0, ys.max() + cy0))
     # of overlapping symmetric segmentations the largest: a part of an object (one bulb

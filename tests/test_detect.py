@@ -70,6 +70,15 @@ def test_automatic_finding_on_a_textured_table(tex):
         assert 0.5 < o.accepted <= 1.0 and o.edge_contrast > 12.0 and np.isfinite(o.symmetry_rms)
 
 
+def test_proposals_side_by_side_give_the_same_objects(tex):
+    # the proposals are segmented from threads; the result must not depend on how many
+    one = T.find_objects(tex.image, iterations=5, min_area=400.0, o=T.DetectOptions(), threads=1)
+    two = T.find_objects(tex.image, iterations=5, min_area=400.0, o=T.DetectOptions(), threads=3)
+    assert len(one[0]) == len(two[0]) == len(tex.objects) and one[1] == two[1] and one[2] == two[2]
+    for (ra, sa), (rb, sb) in zip(one[0], two[0]):
+        assert np.array_equal(ra, rb) and sa == sb
+
+
 def test_a_tight_box_gives_the_outline(tex):
     # the exact bounding boxes: no background band inside them for GrabCut
     out, ws = found_with_warnings(tex.image, tex.boxes)
