@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 
 
 def recorded(fn, *a, errors=(ValueError,), **kw):
@@ -15,3 +16,11 @@ def recorded(fn, *a, errors=(ValueError,), **kw):
         except errors as err:
             res = err
     return res, [str(w.message) for w in ws]
+
+
+def realdata_dir() -> Path:
+    """``shared/realdata`` beside the repository, or beside the nearest folder above it
+    that has one (a git worktree kept elsewhere finds the main checkout's)."""
+    repo = Path(__file__).resolve().parents[1]
+    return next((a / "shared" / "realdata" for a in repo.parents if (a / "shared" / "realdata").is_dir()),
+                repo.parent / "shared" / "realdata")

@@ -40,9 +40,9 @@ import cv2
 import numpy as np
 
 import sorjax
-from _common import recorded
+from _common import realdata_dir, recorded
 
-DEFAULT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "realdata"
+DEFAULT_DATA = realdata_dir()
 SETS = (
     "ycb-video",
     "nvlabs-6dof-graspnet",

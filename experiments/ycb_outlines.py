@@ -76,15 +76,11 @@ import numpy as np
 from matplotlib.path import Path as MplPath
 
 import sorjax
-from _common import recorded
+from _common import realdata_dir, recorded
 from sorjax import scenes as S
 from sorjax.experiment._runner import enable_compilation_cache, environment
 
-REPO = Path(__file__).resolve().parents[1]
-# ../shared/realdata beside the repository, as experiments/realdata.py; from a git
-# worktree (e.g. wt/NAME beside the main checkout) the nearest ancestor holding it
-DEFAULT_DATA = next((a / "shared" / "realdata" for a in REPO.parents if (a / "shared" / "realdata").is_dir()),
-                    REPO.parent / "shared" / "realdata")
+DEFAULT_DATA = realdata_dir()
 SET = "ycb-video"
 TARGET_PX = 0.5
 FOUND_IOU = 0.5

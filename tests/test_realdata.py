@@ -17,7 +17,9 @@ import sorjax
 
 cv2 = pytest.importorskip("cv2")
 
-REALDATA = Path(__file__).resolve().parents[1].parent / "shared" / "realdata"
+# shared/realdata beside the repository (or beside the nearest folder above it that has one: a worktree)
+REALDATA = next((a / "shared" / "realdata" for a in Path(__file__).resolve().parents[1].parents
+                 if (a / "shared" / "realdata").is_dir()), Path(__file__).resolve().parents[1].parent / "shared" / "realdata")
 YCB = REALDATA / "ycb-video"
 
 
