@@ -142,6 +142,11 @@ class DetectOptions:
     move_px: float = 0.3  # the outline moves only where the edge lies farther than this (see refine_to_edges)
     min_support: float = 0.3  # fraction of a smoothing window's points accepted for the outline to move
     reject_px: float = 0.5
+    # automatic finding only: an outline whose estimated error (outline_quality) is larger is dropped.  On the
+    # photo sets (seeds 0 and 7, 3 cameras x 4 images) the outlines kept within 1 px of an object had 0.12-0.96
+    # px; 21 of 31 false detections (box faces, wedges, parts of objects) and 5 of 8 outlines 1.3-54 px off
+    # had more than 1 px, 11 and 4 more than 1.5 px
+    max_error_px: float = 1.5
 
 
 class ImageOutline(np.ndarray):

@@ -1234,7 +1234,10 @@ def outlines_from_image(
         One outline per object (conventions of :func:`outlines_from_mask`; pixel centres
         at integer coordinates), in box order with boxes, largest first without.
         Objects that cannot be segmented, that a box cuts or that touch the image border
-        are left out with a warning that says why.  Each outline is a
+        are left out with a warning that says why; so are, without boxes, outlines whose
+        estimated error (``outline_error`` below) exceeds
+        ``sorjax._detect.DetectOptions.max_error_px`` (1.5 px: most such outlines are
+        false detections or poor segmentations).  Each outline is a
         ``sorjax._detect.ImageOutline`` (an ``np.ndarray`` subclass; ``np.asarray``
         gives the plain array) with what the image said about it:
 
@@ -1305,6 +1308,15 @@ def outlines_from_image(
         if sg is not None:
             segs.append((k, ib) + sg + (sym,))
     out = _finish_all(src, segs, refine=refine, min_area=min_area, smooth=smooth, border=border)
+    limit = DetectOptions().max_error_px
+    for p in out:
+        if getattr(p, "outline_error", 0.0) > limit:
+            x0, y0 = np.asarray(p).min(0)
+            x1, y1 = np.asarray(p).max(0)
+            warnings.warn(f"automatic detection: a region at x {x0:.0f}..{x1:.0f}, y {y0:.0f}..{y1:.0f}: its outline's "
+                          f"estimated error is {p.outline_error:.2g} px (more than {limit:g} px: a false detection or a "
+                          "poor segmentation); dropped. Pass a box around the object to keep it", stacklevel=2)
+    out = [p for p in out if not getattr(p, "outline_error", 0.0) > limit]
     if not out:
         raise ValueError(f"no object outline could be extracted (see the warnings); {_hint('boxes')}")
     order = np.argsort([-_shoelace(p) for p in out], kind="stable")

@@ -79,6 +79,25 @@ def test_proposals_side_by_side_give_the_same_objects(tex):
         assert np.array_equal(ra, rb) and sa == sb
 
 
+def test_outlines_above_the_error_limit_are_dropped_with_a_reason(tex, monkeypatch):
+    import functools
+
+    out, _ = found_with_warnings(tex.image)
+    errs = sorted(o.outline_error for o in out)
+    assert errs[-1] <= T.DetectOptions().max_error_px
+    # a limit between the outlines' errors: the worse ones go, each named with its error
+    limit = 0.5 * (errs[0] + errs[-1])
+    options = T.DetectOptions
+    monkeypatch.setattr(T, "DetectOptions", functools.partial(options, max_error_px=limit))
+    kept, ws = found_with_warnings(tex.image)
+    assert sorted(o.outline_error for o in kept) == [e for e in errs if e <= limit]
+    said = [w for w in ws if "estimated error" in w]
+    assert len(said) == sum(e > limit for e in errs) and all("dropped" in w and "x " in w for w in said)
+    monkeypatch.setattr(T, "DetectOptions", functools.partial(options, max_error_px=0.0))
+    with pytest.raises(ValueError, match="no object outline could be extracted"):
+        found_with_warnings(tex.image)
+
+
 def test_a_tight_box_gives_the_outline(tex):
     # the exact bounding boxes: no background band inside them for GrabCut
     out, ws = found_with_warnings(tex.image, tex.boxes)
