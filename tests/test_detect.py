@@ -58,8 +58,14 @@ def tex():
         mp.undo()
 
 
-def test_automatic_finding_on_a_textured_table(tex):
-    out, _ = found_with_warnings(tex.image)
+@pytest.fixture(scope="module")
+def auto(tex):
+    """The textured scene's outlines found automatically, and the warnings."""
+    return found_with_warnings(tex.image)
+
+
+def test_automatic_finding_on_a_textured_table(tex, auto):
+    out, _ = auto
     assert len(out) == len(tex.objects)
     for obj in tex.objects:
         o = nearest(out, obj.truth.outline)
@@ -79,10 +85,10 @@ def test_proposals_side_by_side_give_the_same_objects(tex):
         assert np.array_equal(ra, rb) and sa == sb
 
 
-def test_outlines_above_the_error_limit_are_dropped_with_a_reason(tex, monkeypatch):
+def test_outlines_above_the_error_limit_are_dropped_with_a_reason(tex, auto, monkeypatch):
     import functools
 
-    out, _ = found_with_warnings(tex.image)
+    out, _ = auto
     errs = sorted(o.outline_error for o in out)
     assert errs[-1] <= T.DetectOptions().max_error_px
     # a limit between the outlines' errors: the worse ones go, each named with its error
@@ -93,9 +99,6 @@ def test_outlines_above_the_error_limit_are_dropped_with_a_reason(tex, monkeypat
     assert sorted(o.outline_error for o in kept) == [e for e in errs if e <= limit]
     said = [w for w in ws if "estimated error" in w]
     assert len(said) == sum(e > limit for e in errs) and all("dropped" in w and "x " in w for w in said)
-    monkeypatch.setattr(T, "DetectOptions", functools.partial(options, max_error_px=0.0))
-    with pytest.raises(ValueError, match="no object outline could be extracted"):
-        found_with_warnings(tex.image)
 
 
 def test_a_tight_box_gives_the_outline(tex):
