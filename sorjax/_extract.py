@@ -1282,7 +1282,8 @@ def outlines_from_image(
         return out
     from ._detect import DetectOptions, find_objects
 
-    objects, notes, s = find_objects(img, iterations=int(iterations), min_area=min_area, o=DetectOptions())
+    detect = DetectOptions()
+    objects, notes, s = find_objects(img, iterations=int(iterations), min_area=min_area, o=detect)
     for note in notes:
         warnings.warn(f"automatic detection: {note}; dropped", stacklevel=2)
     if not objects:
@@ -1308,15 +1309,16 @@ def outlines_from_image(
         if sg is not None:
             segs.append((k, ib) + sg + (sym,))
     out = _finish_all(src, segs, refine=refine, min_area=min_area, smooth=smooth, border=border)
-    limit = DetectOptions().max_error_px
+    limit, kept = detect.max_error_px, []
     for p in out:
-        if getattr(p, "outline_error", 0.0) > limit:
-            x0, y0 = np.asarray(p).min(0)
-            x1, y1 = np.asarray(p).max(0)
-            warnings.warn(f"automatic detection: a region at x {x0:.0f}..{x1:.0f}, y {y0:.0f}..{y1:.0f}: its outline's "
-                          f"estimated error is {p.outline_error:.2g} px (more than {limit:g} px: a false detection or a "
-                          "poor segmentation); dropped. Pass a box around the object to keep it", stacklevel=2)
-    out = [p for p in out if not getattr(p, "outline_error", 0.0) > limit]
+        if not getattr(p, "outline_error", 0.0) > limit:  # NaN (no refinement): kept
+            kept.append(p)
+            continue
+        (x0, y0), (x1, y1) = np.asarray(p).min(0), np.asarray(p).max(0)
+        warnings.warn(f"automatic detection: a region at x {x0:.0f}..{x1:.0f}, y {y0:.0f}..{y1:.0f}: its outline's "
+                      f"estimated error is {p.outline_error:.2g} px (more than {limit:g} px: a false detection or a "
+                      "poor segmentation); dropped. Pass a box around the object to keep it", stacklevel=2)
+    out = kept
     if not out:
         raise ValueError(f"no object outline could be extracted (see the warnings); {_hint('boxes')}")
     order = np.argsort([-_shoelace(p) for p in out], kind="stable")
