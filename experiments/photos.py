@@ -35,7 +35,7 @@ Issue 17's targets (automatic column): >= 90 % found, median RMS <= 0.3 px, >= 9
 them within 1 px, every camera ok or refused, no confident wrong K over >= 30 sets.
 
     python experiments/photos.py [--sets 5] [--seed 0] [--boxes] [--contours] [--no-auto] [--no-masks]
-                                 [--save DIR] [--quick]
+                                 [--save DIR] [--outlines DIR] [--quick]
 
 Cost: a set renders in about 15 s of CPU (most of it the exact silhouettes); the run's
 time is mostly ``sorjax.calibrate`` (one call per camera and column, 10 to 16 views,
@@ -48,6 +48,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import pickle
 import time
 
 import cv2
@@ -75,6 +76,40 @@ def _call(fn, *a, **kw):
 def _first_line(text: str, n: int = 110) -> str:
     t = " ".join(str(text).split())
     return t if len(t) <= n else t[: n - 3] + "..."
+
+
+_ATTRS = ("outline_error", "edge_contrast", "accepted", "symmetry_rms")
+
+
+def _extract(name: str, r: render.Rendering, store: str | None, stem: str):
+    """The outlines of ``r`` from the image (``name`` "auto" or "boxes"), or the
+    exception; with ``store`` (a folder, ``--outlines``) they are read from
+    ``store/stem_name.pkl`` when there and written there otherwise (plain arrays and
+    their ``sorjax._detect.ImageOutline`` attributes), so that a study's calibrations
+    can be rerun without extracting again.  The file is reused whatever code wrote it:
+    empty the folder after changing the extraction."""
+    path = os.path.join(store, f"{stem}_{name}.pkl") if store else None
+    if path and os.path.exists(path):
+        with open(path, "rb") as fh:
+            saved = pickle.load(fh)
+        if isinstance(saved, Exception):
+            return saved
+        from sorjax._detect import ImageOutline
+        return [ImageOutline(pts, **attrs) for pts, attrs in saved]
+    if name == "auto":
+        res, _ = _call(sorjax.outlines_from_image, r.image)
+    else:
+        w, h = r.image_size
+        bx = [(max(0, b[0] - BOX_MARGIN), max(0, b[1] - BOX_MARGIN), min(w - 1, b[2] + BOX_MARGIN),
+               min(h - 1, b[3] + BOX_MARGIN)) for b in r.boxes]
+        res, _ = _call(sorjax.outlines_from_image, r.image, bx)
+    if path:
+        os.makedirs(store, exist_ok=True)
+        saved = res if isinstance(res, Exception) else [
+            (np.asarray(o), {k: float(getattr(o, k, math.nan)) for k in _ATTRS}) for o in res]
+        with open(path, "wb") as fh:
+            pickle.dump(saved, fh)
+    return res
 
 
 def _filled(outline: np.ndarray, shape) -> np.ndarray:
@@ -224,13 +259,8 @@ def run_set(seed: int, args, columns: dict[str, Column]) -> None:
             for k, r in enumerate(cam.renders):
                 label = f"set {seed} camera {ci} image {k}"
                 t1 = time.perf_counter()
-                if name == "auto":
-                    res, _ = _call(sorjax.outlines_from_image, r.image)
-                elif name == "boxes":
-                    w, h = r.image_size
-                    bx = [(max(0, b[0] - BOX_MARGIN), max(0, b[1] - BOX_MARGIN), min(w - 1, b[2] + BOX_MARGIN),
-                           min(h - 1, b[3] + BOX_MARGIN)) for b in r.boxes]
-                    res, _ = _call(sorjax.outlines_from_image, r.image, bx)
+                if name in IMAGE_COLUMNS:
+                    res = _extract(name, r, args.outlines, f"set{seed}_cam{ci}_img{k}")
                 elif name == "contours":
                     res = [c[:, 0, :].astype(np.float64) for o in r.objects
                            for c in cv2.findContours((o.coverage >= 0.5).astype(np.uint8), cv2.RETR_EXTERNAL,
@@ -267,6 +297,10 @@ def main(argv=None):
     ap.add_argument("--no-masks", action="store_true", help="skip the masks (reference) column")
     ap.add_argument("--save", metavar="DIR", help="write each image (PNG of the JPEG-decoded render) and its label "
                                                   "image (object k = k + 1) to DIR")
+    ap.add_argument("--outlines", metavar="DIR", help="keep the outlines found in images (auto, boxes) in DIR and "
+                                                      "reuse them when there: rerun the calibrations of a study "
+                                                      "without extracting again (empty DIR after changing the "
+                                                      "extraction)")
     ap.add_argument("--quick", action="store_true", help="2 sets")
     args = ap.parse_args(argv)
     if args.quick:

@@ -27,7 +27,8 @@ from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
 from ._outline import BINARY_MASK_PX, DEFAULT_POINTS, PIXEL_TRACE_NOTE, _as_outlines, implied_outline_error, jagged_note
 from .core._assess import (ASYMMETRIC, COLLAPSED_FOCAL, CONIC, DUPLICATE, MASKED, PP_OUTSIDE, TRIMMED, USED, WIDE_FOV,
                            outline_radius, view_verdicts)
-from .core._checks import CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, MODEL_WIDENED, ModelChecks
+from .core._checks import (CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, CULPRIT_VIEWS, MODEL_WIDENED,
+                           ModelChecks)
 from .core._calibrate import _intrinsics, calibrate_homologies, calibrate_methods
 from .core._options import Options
 from .core._result import RESULTS
@@ -749,17 +750,16 @@ def _core_distorted(points, homs, aspect, options, image_size, valid, distortion
 
 
 def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, options: Options, image_size,
-              distortion: str = "none", fixed=None, leave_out: int | None = None):
+              distortion: str = "none", fixed=None, leave_out: Sequence[int] = ()):
     """The core on ``V`` views padded to :func:`_bucket` (copies of view 0, masked);
     returns the result of ``method`` as numpy, cut back to ``V`` views.  ``fixed``
-    (4,) ``(fu, fv, u0, v0)`` px held fixed (NaN: free), or None; ``leave_out``: a
-    view masked out as well (the same compiled program)."""
+    (4,) ``(fu, fv, u0, v0)`` px held fixed (NaN: free), or None; ``leave_out``: views
+    masked out as well (the same compiled program)."""
     V = points.shape[0]
     B = _bucket(V)
     pad = lambda x: np.concatenate([x, np.repeat(x[:1], B - V, axis=0)]) if B > V else x  # noqa: E731
     valid = np.arange(B) < V
-    if leave_out is not None:
-        valid[leave_out] = False
+    valid[list(leave_out)] = False
     args = (pad(points), jax.tree_util.tree_map(pad, homs), np.float64(aspect), options,
             np.asarray(image_size, np.float64), valid)
     fixed = None if fixed is None else np.asarray(fixed, np.float64)
@@ -781,7 +781,7 @@ def _estimate(K) -> np.ndarray:
 
 
 def jackknife(r, points: np.ndarray, homs: ViewHomologies, method: str, aspect, options: Options, image_size,
-              fixed=None):
+              fixed=None, left_out: Sequence[int] = ()):
     """The core result ``r`` checked by leaving out each used view in turn, for
     outlines of measured quality (``calibrate(outline_error="measured")``).
 
@@ -796,7 +796,9 @@ def jackknife(r, points: np.ndarray, homs: ViewHomologies, method: str, aspect, 
     at most ``options.measured_undetermined`` (1/60) of the focal length; the others
     are set to NaN and the result code becomes ``degenerate``.  Returns ``(r, notes)``: the result with ``K``, ``covariance``,
     ``std``, ``determined``, ``omega`` and ``result`` updated, and warning texts (none
-    when nothing was determined).  Costs one run of the compiled core per used view."""
+    when nothing was determined).  ``left_out``: views ``r`` was computed without
+    (:func:`leave_out_inconsistent`), left out of every run.  Costs one run of the
+    compiled core per used view."""
     det = np.asarray(r.determined, bool)
     if not det.any() or code_name(r.result) not in ("successful", "degenerate", "only_principal_point"):
         return r, []
@@ -805,7 +807,8 @@ def jackknife(r, points: np.ndarray, homs: ViewHomologies, method: str, aspect, 
     est = _estimate(r.K_raw)
     loo = np.full((n, 4), np.nan)
     for k, i in enumerate(used):
-        ri = _run_core(points, homs, method, aspect, options, image_size, "none", fixed, leave_out=int(i))
+        ri = _run_core(points, homs, method, aspect, options, image_size, "none", fixed,
+                       leave_out=[int(i), *left_out])
         loo[k] = _estimate(ri.K_raw)
     held = np.zeros(4, bool) if fixed is None else np.isfinite(np.asarray(fixed, np.float64))
     loo[:, held] = est[held]
@@ -850,6 +853,36 @@ def jackknife(r, points: np.ndarray, homs: ViewHomologies, method: str, aspect, 
     return r, notes
 
 
+def dominant_view(r, options: Options) -> tuple[int, float] | None:
+    """``(view, share)`` of a result ``r`` (numpy) that the consistency check refused
+    (``inconsistent``, the views to blame) when one view holds at least
+    ``options.measured_leave_share`` of the score statistic ``S = sum_j S_j``
+    (:func:`sorjax.core._checks.view_scores`) and at least 3 used views would remain;
+    else None."""
+    ch = r.checks
+    if code_name(r.result) != "inconsistent" or int(ch.culprit) != CULPRIT_VIEWS:
+        return None
+    used = np.asarray(r.used, bool)
+    S = np.where(used, np.nan_to_num(np.asarray(ch.view_score, np.float64), nan=0.0), 0.0)
+    total = float(S.sum())
+    if used.sum() < 4 or not total > 0:
+        return None
+    j = int(np.argmax(S))
+    share = float(S[j]) / total
+    return (j, share) if share >= float(options.measured_leave_share) else None
+
+
+def _left_out_text(r, j: int, share: float) -> str:
+    ch = r.checks
+    n = int(np.asarray(r.used, bool).sum()) - 1
+    return (f"view {j} left out: the views were not consistent with one camera (chi-square p = "
+            f"{float(ch.consistency_p):.2g} on {int(ch.consistency_dof)} degrees of freedom, "
+            f"{float(ch.consistency_px):.2g} px RMS) and this view held {100 * share:.0f} % of the disagreement "
+            f"(score {float(ch.view_score[j]):.3g}, {float(ch.view_px[j]):.2g} px): most likely it is not a surface "
+            f"of revolution seen by this camera (a false detection or a poor segmentation; check the overlay). "
+            f"Calibrated again from the other {n} views.")
+
+
 def _check_outline_error(outline_error):
     """``(declared px, per-outline errors (px) or None, measured?)`` from
     :func:`calibrate`'s ``outline_error``: a number, "measured" or one number per outline."""
@@ -889,22 +922,24 @@ def _own_errors(outlines):
 
 
 def measured_outline_error(homs: ViewHomologies, points, per_outline=None, *, floor: float = OUTLINE_ERROR_PX,
-                           options: Options = Options()) -> tuple[float, str]:
+                           options: Options = Options(), left_out: Sequence[int] = ()) -> tuple[float, str]:
     """The outline error (px) measured from the outlines, and a note saying so.
 
     Each view's error is its symmetry residual, the RMS residual of its homology fit
     (eq. 20, px; ``homs.rms``), or the outline's own error estimate ``per_outline[i]``
     (px, e.g. an extractor's; NaN: none) when larger; the measured error is their RMS
     over the views the calibration keeps (:func:`sorjax.core._assess.view_verdicts`: not a
-    conic, not asymmetric, not over-trimmed), and at least ``floor``.  A residual
+    conic, not asymmetric, not over-trimmed, not in ``left_out``), and at least ``floor``.  A residual
     shows only the outline errors that break the symmetry; a segmentation that leaks
     or shrinks has errors that keep it as well, of about the same size, which the
     perspective gate must allow for: outlines 1 to 2 px from symmetric with the
     default 0.1 px gave a confident wrong K (issue 17: fu 809 +- 29 px for a true 980)."""
     pts = jnp.asarray(points)
+    valid = np.ones(pts.shape[0], bool)
+    valid[list(left_out)] = False
     keep = np.asarray(view_verdicts(jnp.asarray(homs.rms), jnp.asarray(homs.rms_untrimmed), outline_radius(pts),
                                     jnp.asarray(homs.is_conic), jnp.asarray(homs.trimmed),
-                                    jnp.ones(pts.shape[0], bool), options)) == USED
+                                    jnp.asarray(valid), options)) == USED
     rms = np.asarray(homs.rms, np.float64)
     err = rms if per_outline is None else np.fmax(rms, np.asarray(per_outline, np.float64))
     ok = keep & np.isfinite(err)
@@ -1100,10 +1135,12 @@ def calibrate(
         outline_error = floor_px
     if measure and per_outline is None:
         per_outline = _own_errors(raw)
+    floor_px = float(outline_error)
     if measure:
-        outline_error, note = measured_outline_error(homs, points, per_outline, floor=float(outline_error),
+        outline_error, note = measured_outline_error(homs, points, per_outline, floor=floor_px,
                                                      options=Options(n_samples=n_samples))
         floor_note.append(note)
+        measured_at = len(floor_note) - 1
     options = Options(n_samples=n_samples, outline_error_px=float(outline_error))
     a = None if method in ("IIa",) or (method == "bundle" and aspect_ratio is None) else (
         1.0 if aspect_ratio is None else float(aspect_ratio)
@@ -1111,12 +1148,28 @@ def calibrate(
     fixed = None
     if pp_fixed is not None or f_fixed is not None:
         fixed = (math.nan, math.nan if f_fixed is None else f_fixed) + (pp_fixed or (math.nan, math.nan))
-    r = _run_core(points, homs, method, math.nan if aspect_ratio is None else float(aspect_ratio), options,
-                  (math.nan, math.nan) if image_size is None else image_size, distortion, fixed)
+    run = functools.partial(_run_core, points, homs, method, math.nan if aspect_ratio is None else float(aspect_ratio))
+    size = (math.nan, math.nan) if image_size is None else image_size
+    r = run(options, size, distortion, fixed)
+    # outlines of measured quality (found in images): a view the consistency check blames
+    # almost alone is left out, and the rest calibrated again (Options.measured_leave_out)
+    left_out: dict[int, str] = {}
+    while measure and len(left_out) < options.measured_leave_out:
+        dom = dominant_view(r, options)
+        if dom is None:
+            break
+        j, share = dom
+        floor_note.append(_left_out_text(r, j, share))
+        left_out[j] = f"inconsistent with the other views ({100 * share:.0f} % of the consistency score)"
+        outline_error, note = measured_outline_error(homs, points, per_outline, floor=floor_px,
+                                                     options=Options(n_samples=n_samples), left_out=list(left_out))
+        floor_note[measured_at] = note
+        options = Options(n_samples=n_samples, outline_error_px=float(outline_error))
+        r = run(options, size, distortion, fixed, leave_out=list(left_out))
 
     if measure and distortion == "none":
         r, jack_notes = jackknife(r, points, homs, method, math.nan if aspect_ratio is None else float(aspect_ratio),
-                                  options, (math.nan, math.nan) if image_size is None else image_size, fixed)
+                                  options, size, fixed, left_out=list(left_out))
         floor_note += jack_notes
     dup_of = np.asarray(r.checks.duplicate_of)
     notes = (floor_note + view_notes(homs, r.drop_reason, dup_of=dup_of) + model_notes(r, outline_error, fixed)
@@ -1128,7 +1181,8 @@ def calibrate(
     cal = Calibration(
         jnp.asarray(r.K), jnp.asarray(r.omega), homologies, _code_item(r.result), jnp.asarray(r.covariance),
         jnp.asarray(r.cost), jnp.asarray(r.view_rms[r.used]), jnp.asarray(r.steps), jnp.asarray(r.v_x[r.used]),
-        jnp.asarray(r.l_s[r.used]), method, a, used, details, dropped_views(homs, r.drop_reason, dup_of),
+        jnp.asarray(r.l_s[r.used]), method, a, used, details,
+        tuple((i, left_out.get(i, why)) for i, why in dropped_views(homs, r.drop_reason, dup_of)),
         tuple(notes), float(r.perspective_px), float(r.perspective_z), float(outline_error),
         jax.tree_util.tree_map(jnp.asarray, r.checks), distortion,
         None if distortion == "none" else jnp.asarray(r.distortion[: {"k1": 1, "k1k2": 2}[distortion]]),

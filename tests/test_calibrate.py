@@ -247,3 +247,38 @@ def test_measured_outlines_survive_leaving_out_a_view():
     assert any("not determined: with outlines of measured quality" in w for w in ws)
     det = np.isfinite(est)
     assert np.all(np.abs(est - truth)[det] <= np.minimum(3 * cal.std[det], 0.05 * 600.0))
+
+
+def test_measured_outlines_leave_out_the_view_the_consistency_check_blames():
+    """With outlines of measured quality (the image path) a view that holds most of the
+    consistency check's score (an outline of another camera here, f = 300 px among five
+    views of f = 600 px: a stand-in for a symmetric false detection) is left out and the
+    camera calibrated from the others: the same K as from the five views alone, within
+    its std, with the view named in ``dropped`` and a warning.  Never below 3 views: two
+    good views and the stranger stay refused.  Seeded (random_sor_scene seeds 0, 100)."""
+    import warnings
+
+    K = scenes.intrinsics(600.0, principal_point=(330.0, 250.0))
+    truth = np.array([600.0, 600.0, 330.0, 250.0])
+    rng = np.random.default_rng(0)
+    good = [o + rng.normal(0, 0.05, o.shape) for o in scenes.random_sor_scene(0, 5, K=K).outlines]
+    stranger = scenes.random_sor_scene(100, 1, K=scenes.intrinsics(300.0, principal_point=(200.0, 150.0))).outlines[0]
+
+    def run(outs):
+        with warnings.catch_warnings(record=True) as ws:
+            warnings.simplefilter("always")
+            cal = sorjax.calibrate(outs, outline_error="measured", image_size=(640, 480))
+        return cal, [str(w.message) for w in ws]
+
+    alone, _ = run(good)
+    cal, ws = run(good[:2] + [stranger] + good[2:])
+    assert cal.success and cal.used == (0, 1, 3, 4, 5)
+    assert cal.dropped == ((2, "inconsistent with the other views (91 % of the consistency score)"),)
+    assert any(w.startswith("view 2 left out: the views were not consistent with one camera") for w in ws)
+    est = np.array([cal.fu, cal.fv, cal.u0, cal.v0])
+    assert np.all(np.abs(est - truth) <= 3 * cal.std) and abs(cal.fv - 600.0) < 0.01 * 600.0
+    np.testing.assert_allclose(est, [alone.fu, alone.fv, alone.u0, alone.v0], rtol=1e-6)
+    np.testing.assert_allclose(cal.std, alone.std, rtol=1e-4)
+    assert cal.outline_error == pytest.approx(alone.outline_error)
+    few, ws = run(good[:2] + [stranger])
+    assert not few.success and few.dropped == () and not any("left out:" in w for w in ws)
