@@ -215,6 +215,26 @@ def test_measured_outline_error_refuses_a_confident_wrong_focal_length():
             sorjax.calibrate(outs, homologies=homs, outline_error=bad)
 
 
+def _measured(outs):
+    """``calibrate(outs, outline_error="measured")`` (the image path) on a 640x480
+    image, and its warnings' texts."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as ws:
+        warnings.simplefilter("always")
+        cal = sorjax.calibrate(outs, outline_error="measured", image_size=(640, 480))
+    return cal, [str(w.message) for w in ws]
+
+
+def _good_views(n=5):
+    """``n`` views of a camera with f = 600 px, principal point (330, 250), with 0.05 px
+    of noise (random_sor_scene seed 0, noise seed 0), and the truth (fu, fv, u0, v0)."""
+    K = scenes.intrinsics(600.0, principal_point=(330.0, 250.0))
+    rng = np.random.default_rng(0)
+    good = [o + rng.normal(0, 0.05, o.shape) for o in scenes.random_sor_scene(0, n, K=K).outlines]
+    return good, np.array([600.0, 600.0, 330.0, 250.0])
+
+
 def test_measured_outlines_survive_leaving_out_a_view():
     """Outlines of measured quality (outline_error="measured", the image path) are
     checked by leaving out each view (jackknife): five views of a camera with f = 600 px
@@ -223,25 +243,13 @@ def test_measured_outlines_survive_leaving_out_a_view():
     objects) among them gave fu 570 +- 12 px for the true 600 (5 % off) without the
     check, and leave the focal length undetermined with it.  Seeded (random_sor_scene
     seeds 0 and 100)."""
-    import warnings
-
-    K = scenes.intrinsics(600.0, principal_point=(330.0, 250.0))
-    truth = np.array([600.0, 600.0, 330.0, 250.0])
-    rng = np.random.default_rng(0)
-    good = [o + rng.normal(0, 0.05, o.shape) for o in scenes.random_sor_scene(0, 5, K=K).outlines]
+    good, truth = _good_views()
     other = scenes.random_sor_scene(100, 2, K=scenes.intrinsics(450.0, principal_point=(330.0, 250.0))).outlines
-
-    def run(outs):
-        with warnings.catch_warnings(record=True) as ws:
-            warnings.simplefilter("always")
-            cal = sorjax.calibrate(outs, outline_error="measured", image_size=(640, 480))
-        return cal, [str(w.message) for w in ws]
-
-    cal, ws = run(good)
+    cal, ws = _measured(good)
     assert cal.success and any("leave-one-view-out check" in w for w in ws)
     est = np.array([cal.fu, cal.fv, cal.u0, cal.v0])
     assert np.all(np.abs(est - truth) <= 3 * cal.std) and abs(cal.fv - 600.0) < 0.01 * 600.0
-    cal, ws = run(good + list(other))
+    cal, ws = _measured(good + list(other))
     est = np.array([cal.fu, cal.fv, cal.u0, cal.v0])
     assert not cal.success and np.all(np.isnan(est[:2]))
     assert any("not determined: with outlines of measured quality" in w for w in ws)
@@ -256,22 +264,10 @@ def test_measured_outlines_leave_out_the_view_the_consistency_check_blames():
     camera calibrated from the others: the same K as from the five views alone, within
     its std, with the view named in ``dropped`` and a warning.  Never below 3 views: two
     good views and the stranger stay refused.  Seeded (random_sor_scene seeds 0, 100)."""
-    import warnings
-
-    K = scenes.intrinsics(600.0, principal_point=(330.0, 250.0))
-    truth = np.array([600.0, 600.0, 330.0, 250.0])
-    rng = np.random.default_rng(0)
-    good = [o + rng.normal(0, 0.05, o.shape) for o in scenes.random_sor_scene(0, 5, K=K).outlines]
+    good, truth = _good_views()
     stranger = scenes.random_sor_scene(100, 1, K=scenes.intrinsics(300.0, principal_point=(200.0, 150.0))).outlines[0]
-
-    def run(outs):
-        with warnings.catch_warnings(record=True) as ws:
-            warnings.simplefilter("always")
-            cal = sorjax.calibrate(outs, outline_error="measured", image_size=(640, 480))
-        return cal, [str(w.message) for w in ws]
-
-    alone, _ = run(good)
-    cal, ws = run(good[:2] + [stranger] + good[2:])
+    alone, _ = _measured(good)
+    cal, ws = _measured(good[:2] + [stranger] + good[2:])
     assert cal.success and cal.used == (0, 1, 3, 4, 5)
     assert cal.dropped == ((2, "inconsistent with the other views (91 % of the consistency score)"),)
     assert any(w.startswith("view 2 left out: the views were not consistent with one camera") for w in ws)
@@ -280,5 +276,5 @@ def test_measured_outlines_leave_out_the_view_the_consistency_check_blames():
     np.testing.assert_allclose(est, [alone.fu, alone.fv, alone.u0, alone.v0], rtol=1e-6)
     np.testing.assert_allclose(cal.std, alone.std, rtol=1e-4)
     assert cal.outline_error == pytest.approx(alone.outline_error)
-    few, ws = run(good[:2] + [stranger])
+    few, ws = _measured(good[:2] + [stranger])
     assert not few.success and few.dropped == () and not any("left out:" in w for w in ws)
