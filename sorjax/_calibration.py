@@ -797,7 +797,7 @@ def jackknife(r, points: np.ndarray, homs: ViewHomologies, method: str, aspect, 
     are set to NaN and the result code becomes ``degenerate``.  Returns ``(r, notes)``: the result with ``K``, ``covariance``,
     ``std``, ``determined``, ``omega`` and ``result`` updated, and warning texts (none
     when nothing was determined).  ``left_out``: views ``r`` was computed without
-    (:func:`leave_out_inconsistent`), left out of every run.  Costs one run of the
+    (:func:`dominant_view`, left out by :func:`calibrate`), left out of every run.  Costs one run of the
     compiled core per used view."""
     det = np.asarray(r.determined, bool)
     if not det.any() or code_name(r.result) not in ("successful", "degenerate", "only_principal_point"):
@@ -1003,7 +1003,11 @@ def calibrate(
             intrinsic counts as determined only when its widened std is at most
             ``Options.measured_undetermined`` (1/60) of the focal length, so that an
             outline that is wrong without looking it (a symmetric piece of clutter
-            taken for an object) cannot make a confident wrong K.  Outlines on a
+            taken for an object) cannot make a confident wrong K.  A view that the
+            consistency check blames almost alone (:func:`dominant_view`: at least
+            ``Options.measured_leave_share`` of its score) is left out and the rest
+            calibrated again, at most ``Options.measured_leave_out`` views and never
+            below three, with a warning and the view in ``Calibration.dropped``.  Outlines on a
             pixel grid raise it further (whole-pixel coordinates, staircases; a pixel
             trace as ``cv2.findContours`` gives is replaced by its binary mask's
             outline, :func:`sorjax.make_outline`, and counts as accurate as that).
