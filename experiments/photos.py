@@ -11,6 +11,9 @@ shadows, reflections, glass and metal objects, defocus, noise and JPEG
   grown by 8 px (with ``--boxes``);
 * ``masks`` : ``sorjax.outlines_from_mask`` of each object's exact soft mask (its
   coverage), the reference (the ``sorjax calibrate --masks`` path);
+* ``masks@PX`` (with ``--mask-errors PX ...``): the same outlines calibrated with
+  ``outline_error=PX``: how accurate outlines from images must be for the
+  perspective gate to let each camera through;
 * ``contours`` : ``cv2.findContours`` of each object's binary mask (coverage >= 0.5),
   passed to ``sorjax.calibrate`` as they are (with ``--contours``).
 
@@ -35,7 +38,7 @@ Issue 17's targets (automatic column): >= 90 % found, median RMS <= 0.3 px, >= 9
 them within 1 px, every camera ok or refused, no confident wrong K over >= 30 sets.
 
     python experiments/photos.py [--sets 5] [--seed 0] [--boxes] [--contours] [--no-auto] [--no-masks]
-                                 [--save DIR] [--outlines DIR] [--quick]
+                                 [--save DIR] [--outlines DIR] [--mask-errors PX ...] [--quick]
 
 Cost: a set renders in about 15 s of CPU (most of it the exact silhouettes); the run's
 time is mostly ``sorjax.calibrate`` (one call per camera and column, 10 to 16 views,
@@ -146,8 +149,11 @@ def outline_rms(outline: np.ndarray, exact: np.ndarray) -> float:
 class Column:
     """Tallies of one outline source."""
 
-    def __init__(self, name: str):
+    def __init__(self, name: str, declared: float | str | None = None):
         self.name = name
+        # the outline error calibrate is given: "measured" for outlines found in images
+        # (as the CLI), the default 0.1 px for masks and outline files, or as asked
+        self.declared = declared if declared is not None else "measured" if name in IMAGE_COLUMNS else 0.1
         self.objects = self.found = self.occluded = self.occluded_found = self.extra = 0
         self.rms: list[float] = []
         self.image_failures: list[str] = []
@@ -180,9 +186,7 @@ class Column:
             self.cameras.append("refused")
             return f"refused: {len(outlines)} outline(s)"
         t0 = time.perf_counter()
-        # what `sorjax calibrate` does: images' outlines carry a measured error, masks and files the default
-        err = "measured" if self.name in IMAGE_COLUMNS else 0.1
-        cal, ws = _call(sorjax.calibrate, outlines, image_size=size, outline_error=err)
+        cal, ws = _call(sorjax.calibrate, outlines, image_size=size, outline_error=self.declared)
         self.cal_seconds += time.perf_counter() - t0
         if isinstance(cal, Exception):
             self.cameras.append("refused")
@@ -301,6 +305,9 @@ def main(argv=None):
                                                       "reuse them when there: rerun the calibrations of a study "
                                                       "without extracting again (empty DIR after changing the "
                                                       "extraction)")
+    ap.add_argument("--mask-errors", metavar="PX", type=float, nargs="+", default=[],
+                    help="also calibrate the masks' outlines declaring these outline errors (px): how accurate must "
+                         "outlines be for the perspective gate to let a camera through (a column masks@PX each)")
     ap.add_argument("--quick", action="store_true", help="2 sets")
     args = ap.parse_args(argv)
     if args.quick:
@@ -308,9 +315,14 @@ def main(argv=None):
     enable_compilation_cache()
     names = (([] if args.no_auto else ["auto"]) + (["boxes"] if args.boxes else [])
              + ([] if args.no_masks else ["masks"]) + (["contours"] if args.contours else []))
-    if not names:
-        ap.error("no column left to run (drop --no-auto or --no-masks, or add --boxes / --contours)")
     columns = {n: Column(n) for n in names}
+    for e in args.mask_errors:
+        if not (math.isfinite(e) and e >= 0):
+            ap.error(f"--mask-errors: an outline error is a number of pixels >= 0, got {e}")
+        columns[f"masks@{e:g}"] = Column(f"masks@{e:g}", declared=e)
+    names = list(columns)
+    if not names:
+        ap.error("no column left to run (drop --no-auto or --no-masks, or add --boxes / --contours / --mask-errors)")
     print(f"sorjax photo-like test bed: {args.sets} set(s), seeds {args.seed}..{args.seed + args.sets - 1}, "
           f"{args.cameras} cameras x {args.images} images; columns {', '.join(names)}", flush=True)
     t0 = time.perf_counter()
