@@ -1152,13 +1152,14 @@ def calibrate(
     fixed = None
     if pp_fixed is not None or f_fixed is not None:
         fixed = (math.nan, math.nan if f_fixed is None else f_fixed) + (pp_fixed or (math.nan, math.nan))
-    run = functools.partial(_run_core, points, homs, method, math.nan if aspect_ratio is None else float(aspect_ratio))
+    aspect = math.nan if aspect_ratio is None else float(aspect_ratio)
     size = (math.nan, math.nan) if image_size is None else image_size
+    run = functools.partial(_run_core, points, homs, method, aspect)
     r = run(options, size, distortion, fixed)
     # outlines of measured quality (found in images): a view the consistency check blames
     # almost alone is left out, and the rest calibrated again (Options.measured_leave_out)
     left_out: dict[int, str] = {}
-    while measure and len(left_out) < options.measured_leave_out:
+    while measure and len(left_out) < int(options.measured_leave_out):
         dom = dominant_view(r, options)
         if dom is None:
             break
@@ -1172,8 +1173,7 @@ def calibrate(
         r = run(options, size, distortion, fixed, leave_out=list(left_out))
 
     if measure and distortion == "none":
-        r, jack_notes = jackknife(r, points, homs, method, math.nan if aspect_ratio is None else float(aspect_ratio),
-                                  options, size, fixed, left_out=list(left_out))
+        r, jack_notes = jackknife(r, points, homs, method, aspect, options, size, fixed, left_out=list(left_out))
         floor_note += jack_notes
     dup_of = np.asarray(r.checks.duplicate_of)
     notes = (floor_note + view_notes(homs, r.drop_reason, dup_of=dup_of) + model_notes(r, outline_error, fixed)

@@ -1,7 +1,8 @@
 """Every threshold of the calibration pipeline, in one documented object.
 
 :class:`Options` is an ``equinox.Module``.  Its sizes and budgets (integers) are
-static fields: they fix the compiled program's shapes and loop bounds.  Its thresholds
+static fields: they fix the compiled program's shapes and loop bounds (except
+``measured_leave_out``, which only the shell reads).  Its thresholds
 (floats) are ordinary leaves: passed through ``jax.jit`` they are traced, so one
 compiled program serves any thresholds (and ``jax.vmap`` can sweep one).  Code in the
 core therefore uses the thresholds in array expressions only, never in Python ``if``.  The defaults are the values the measurements in ``docs/results.md`` were
@@ -121,7 +122,6 @@ class Options(eqx.Module):
     screen_steps: int = eqx.field(static=True, default=5)
     trim_rounds: int = eqx.field(static=True, default=3)
     distortion_screen_steps: int = eqx.field(static=True, default=20)
-    measured_leave_out: int = eqx.field(static=True, default=2)
 
     trim_k: float = 4.0
     trim_floor_px: float = 0.1
@@ -143,6 +143,7 @@ class Options(eqx.Module):
     residual_floor_px: float = 0.1
     outline_error_px: float = 0.1
     measured_undetermined: float = 1.0 / 60.0
+    measured_leave_out: int = 2  # read by the shell only: an ordinary leaf, so changing it recompiles nothing
     measured_leave_share: float = 0.5
     perspective_z: float = 3.0
     perspective_factor: float = 3.0
