@@ -400,6 +400,44 @@ def mirrored(region: np.ndarray, W, offset=(0, 0)) -> np.ndarray:
     return out.astype(bool)
 
 
+def mirror_grabcut(img: np.ndarray, win, fg: np.ndarray, W, iterations: int, o: DetectOptions):
+    """The region ``fg`` (bool, the window ``win`` = (x0, y0, x1, y1) of the uint8 BGR
+    image ``img``) segmented again by GrabCut with its own mirror image under the
+    harmonic homology ``W`` (3x3, pixels of ``img``) as a guide: the bool region, or
+    None when the homology does not map the region near onto itself (they share less
+    than half of it) or GrabCut keeps less than half of it.
+
+    The region ``R`` and its mirror ``W(R)`` agree where the outline is right: ``R &
+    W(R)`` is probable foreground (sure foreground ``recut_px`` inside it), the
+    disagreement ``R ^ W(R)`` and a band of ``recut_px`` around ``R | W(R)`` probable
+    background, the rest background, so that only the colours put a one-sided part
+    (a leak on one side, or the mirror of a bite on the other) back."""
+    from ._extract import _dilate, _erode, _grabcut, _largest_component
+
+    x0, y0, x1, y1 = win
+    m = mirrored(fg, np.asarray(W), (x0, y0))
+    both, either = fg & m, fg | m
+    if both.sum() < 0.5 * fg.sum():
+        return None
+    r = max(1, int(round(o.recut_px)))
+    init = np.full(fg.shape, cv2.GC_BGD, np.uint8)
+    init[_dilate(either, r)] = cv2.GC_PR_BGD
+    init[both] = cv2.GC_PR_FGD
+    init[_erode(both, r)] = cv2.GC_FGD
+    try:
+        new = _largest_component(_grabcut(np.ascontiguousarray(img[y0:y1, x0:x1]), init, None, iterations))
+    except cv2.error:
+        return None
+    return new if new.sum() >= 0.5 * fg.sum() else None
+
+
+def needs_recut(hom, o: DetectOptions) -> bool:
+    """Whether the robust homology fit ``hom`` trimmed more than ``1 - recut_inliers`` of
+    its outline: a one-sided leak or bite that :func:`mirror_grabcut` may cut."""
+    return hom is not None and hom.inliers is not None and \
+        float(np.mean(np.asarray(hom.inliers))) < o.recut_inliers
+
+
 def symmetric_recut(sm: np.ndarray, win, fg: np.ndarray, hom, iterations: int, o: DetectOptions,
                     judged_ok: bool = True):
     """A segmentation's one-sided defects cut by its own symmetry: ``(fg, trimmed RMS
@@ -409,36 +447,19 @@ def symmetric_recut(sm: np.ndarray, win, fg: np.ndarray, hom, iterations: int, o
     background on one side (a shadow, a patch of table of the object's colour) or a
     bite: up to ``1 - min_inliers`` of the outline is trimmed, and the outline lies
     tens of pixels off there (photo sets: 17-21 px RMS for three such outlines that the
-    judge kept).  The region ``R`` and its mirror ``W(R)`` under the fitted homology
-    ``W`` agree where the outline is right: GrabCut is rerun on the window with ``R &
-    W(R)`` as probable foreground (sure foreground ``recut_px`` inside it), the
-    disagreement ``R ^ W(R)`` and a band of ``recut_px`` around ``R | W(R)`` as probable
-    background, the rest as background, so that only the colours put a one-sided part
-    back.  The new segmentation is taken when :func:`judge` keeps it and, for a region
-    the judge had kept (``judged_ok``), its untrimmed residual is at most ``recut_gain``
-    times the old one; a kept region is tried only when its fit trimmed more than ``1 -
-    recut_inliers`` of the outline."""
-    from ._extract import _dilate, _erode, _grabcut, _largest_component
-
+    judge kept).  The region is segmented again by :func:`mirror_grabcut` (the image
+    ``sm``, the window ``win``, the fitted homology ``hom``); the new segmentation is
+    taken when :func:`judge` keeps it and, for a region the judge had kept
+    (``judged_ok``), its untrimmed residual is at most ``recut_gain`` times the old one;
+    a kept region is tried only when its fit trimmed more than ``1 - recut_inliers`` of
+    the outline (:func:`needs_recut`)."""
     raw0 = float(hom.rms_untrimmed)
-    if judged_ok and (hom.inliers is None or float(np.mean(np.asarray(hom.inliers))) >= o.recut_inliers):
+    if judged_ok and not needs_recut(hom, o):
         return None
-    x0, y0, x1, y1 = win
-    m = mirrored(fg, np.asarray(hom.W), (x0, y0))
-    both, either = fg & m, fg | m
-    if both.sum() < 0.5 * fg.sum():
-        return None  # the homology does not map the region near onto itself
-    r = max(1, int(round(o.recut_px)))
-    init = np.full(fg.shape, cv2.GC_BGD, np.uint8)
-    init[_dilate(either, r)] = cv2.GC_PR_BGD
-    init[both] = cv2.GC_PR_FGD
-    init[_erode(both, r)] = cv2.GC_FGD
-    try:
-        new = _largest_component(_grabcut(np.ascontiguousarray(sm[y0:y1, x0:x1]), init, None, iterations))
-    except cv2.error:
+    new = mirror_grabcut(sm, win, fg, hom.W, iterations, o)
+    if new is None:
         return None
-    if new.sum() < 0.5 * fg.sum():
-        return None
+    x0, y0 = win[:2]
     p, h = symmetry_of(new, (x0, y0))
     if p is None:
         return None
@@ -725,7 +746,18 @@ def refine_to_edges(image, p: np.ndarray, o: DetectOptions, keep: bool = False):
     return q, stats
 
 
-def outline_quality(p: np.ndarray, stats: dict) -> dict:
+def outline_homology(p: np.ndarray):
+    """The robust harmonic homology fitted to the outline ``p`` (N, 2 px), or None when
+    none can be fitted."""
+    from ._homology import fit_homology
+
+    try:
+        return fit_homology(p, robust=True)
+    except (ValueError, FloatingPointError):
+        return None
+
+
+def outline_quality(p: np.ndarray, stats: dict, hom=False) -> dict:
     """The :class:`ImageOutline` attributes of the refined outline ``p`` from the edge
     statistics of :func:`refine_to_edges` and the symmetry of ``p`` itself: a surface
     of revolution's outline is mapped onto itself by its harmonic homology, so its
@@ -739,14 +771,12 @@ def outline_quality(p: np.ndarray, stats: dict) -> dict:
     RMS error (10th-90th percentile, median 0.76, 36 outlines matched to objects) and
     as little as 1/100 of it for a leak (three outlines 17-21 px off read 0.2-1.6 px);
     with the untrimmed residual (and the re-cut and the limits of
-    :func:`find_objects`) 0.71-1.50 (median 1.21, 30 outlines, the worst 0.21)."""
-    from ._homology import fit_homology
+    :func:`find_objects`) 0.71-1.50 (median 1.21, 30 outlines, the worst 0.21).
 
-    try:
-        h = fit_homology(p, robust=True)
-        sym, raw = float(h.rms), float(h.rms_untrimmed)
-    except (ValueError, FloatingPointError):
-        sym = raw = math.nan
+    ``hom``: the outline's homology when already fitted (:func:`outline_homology`; None
+    when none could be); by default it is fitted here."""
+    h = outline_homology(p) if hom is False else hom
+    sym, raw = (float(h.rms), float(h.rms_untrimmed)) if h is not None else (math.nan, math.nan)
     u = max(sym, raw) if np.isfinite(raw) else sym
     err = stats.get("outline_error", math.nan)
     if np.isfinite(u):

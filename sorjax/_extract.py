@@ -1147,12 +1147,38 @@ def _auto_init(comp: np.ndarray, shape, window, r: int) -> np.ndarray:
     return init[cy0 - ey0:cy1 - ey0, cx0 - ex0:cx1 - ex0]
 
 
-def _finish_all(src: _Image, segs, *, refine, min_area, smooth, border) -> list[np.ndarray]:
+def _refined(src: _Image, k, b, w, fg, *, inner, min_area, smooth, border, o):
+    """``(outline, edge statistics, homology)`` of the segmented object ``fg`` (window
+    ``w``) moved onto the image's edges (:func:`sorjax._detect.refine_to_edges`), or None
+    with a warning from :func:`_finish`."""
+    from ._detect import outline_homology, refine_to_edges
+
+    p = _finish(src, b, k, w, fg, inner=inner, min_area=min_area, smooth=smooth, border=border)
+    if p is None:
+        return None
+    q, stats = refine_to_edges((src.f64, src.shape), p, o)
+    p = _start_at_top(_clean_loop(q))
+    if border == "cut":
+        H, W = src.shape
+        p = np.column_stack([np.clip(p[:, 0], -0.5, W - 0.5), np.clip(p[:, 1], -0.5, H - 0.5)])
+    return p, stats, outline_homology(p)
+
+
+def _finish_all(src: _Image, segs, *, refine, min_area, smooth, border, iterations: int = 5) -> list[np.ndarray]:
     """Outlines of the segmented objects ``(index, box, window, fg, symmetry_rms)`` of one
     image, with one unmixing band for all, each moved onto the image's edges when
-    ``refine`` (:func:`sorjax._detect.refine_to_edges`), as :class:`ImageOutline` arrays."""
-    from ._detect import DetectOptions, ImageOutline, outline_quality, refine_to_edges
+    ``refine`` (:func:`sorjax._detect.refine_to_edges`), as :class:`ImageOutline` arrays.
 
+    A refined outline whose robust homology fit trims more than ``1 -
+    DetectOptions.recut_inliers`` of it (a one-sided leak or bite at full resolution) is
+    segmented again with its mirror image as a guide (:func:`sorjax._detect.mirror_grabcut`,
+    ``iterations`` of GrabCut) and refined again; the new outline replaces it when its
+    estimated error is at most ``recut_gain`` times the old one.  On the photo-like
+    renders (:func:`sorjax.render.random_photo_set` seeds 100-109, one camera, 4 images)
+    RECUT_NUMBERS."""
+    from ._detect import DetectOptions, ImageOutline, mirror_grabcut, needs_recut, outline_quality
+
+    o = DetectOptions()
     inner = None
     if refine and segs:
         inner = _inner_band([_edge_sharpness(lambda y0, y1, x0, x1, w=w: src.f64(w[1] + y0, w[1] + y1, w[0] + x0,
@@ -1160,18 +1186,28 @@ def _finish_all(src: _Image, segs, *, refine, min_area, smooth, border) -> list[
                              for _, _, w, fg, _ in segs])
     out = []
     for k, b, w, fg, sym in segs:
-        p = _finish(src, b, k, w, fg, inner=inner, min_area=min_area, smooth=smooth, border=border)
-        if p is None:
-            continue
         if not refine:
-            out.append(ImageOutline(p, symmetry_rms=sym))
+            p = _finish(src, b, k, w, fg, inner=inner, min_area=min_area, smooth=smooth, border=border)
+            if p is not None:
+                out.append(ImageOutline(p, symmetry_rms=sym))
             continue
-        q, stats = refine_to_edges((src.f64, src.shape), p, DetectOptions())
-        p = _start_at_top(_clean_loop(q))
-        if border == "cut":
-            H, W = src.shape
-            p = np.column_stack([np.clip(p[:, 0], -0.5, W - 0.5), np.clip(p[:, 1], -0.5, H - 0.5)])
-        out.append(ImageOutline(p, **outline_quality(p, stats)))
+        got = _refined(src, k, b, w, fg, inner=inner, min_area=min_area, smooth=smooth, border=border, o=o)
+        if got is None:
+            continue
+        p, stats, hom = got
+        quality = outline_quality(p, stats, hom)
+        if needs_recut(hom, o):
+            new = mirror_grabcut(src.u8, w, fg, hom.W, iterations, o)
+            if new is not None:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")  # the first outline stands: its warnings were given
+                    again = _refined(src, k, b, w, new, inner=inner, min_area=min_area, smooth=smooth,
+                                     border=border, o=o)
+                if again is not None:
+                    q_quality = outline_quality(*again)
+                    if q_quality["outline_error"] <= o.recut_gain * quality["outline_error"]:
+                        p, quality = again[0], q_quality
+        out.append(ImageOutline(p, **quality))
     return out
 
 
@@ -1273,7 +1309,8 @@ def outlines_from_image(
             sg = _segment_box(img, b, k, iterations=int(iterations), min_area=min_area)
             if sg is not None:
                 segs.append((k, b) + sg + (math.nan,))
-        out = _finish_all(src, segs, refine=refine, min_area=min_area, smooth=smooth, border=border)
+        out = _finish_all(src, segs, refine=refine, min_area=min_area, smooth=smooth, border=border,
+                      iterations=int(iterations))
         if not out:
             raise ValueError(
                 f"no object outline could be extracted from any of the {len(bxs)} boxes (see the "
@@ -1308,7 +1345,8 @@ def outlines_from_image(
         sg = _segment_box(img, ib, k, iterations=int(iterations), min_area=min_area, init=init)
         if sg is not None:
             segs.append((k, ib) + sg + (sym,))
-    out = _finish_all(src, segs, refine=refine, min_area=min_area, smooth=smooth, border=border)
+    out = _finish_all(src, segs, refine=refine, min_area=min_area, smooth=smooth, border=border,
+                      iterations=int(iterations))
     limit, kept = detect.max_error_px, []
     for p in out:
         if not getattr(p, "outline_error", 0.0) > limit:  # NaN (no refinement): kept

@@ -273,6 +273,42 @@ def test_a_one_sided_leak_is_cut_by_the_symmetry():
     assert T.symmetric_recut(img, win, vase, hom2, 5, o) is None
 
 
+def test_a_leak_at_full_resolution_is_cut_by_the_symmetry(monkeypatch):
+    import functools
+
+    # the full-resolution segmentation of a found object leaks into the table on one side
+    # (what a kept region does when GrabCut at full resolution takes a shadow): its
+    # refined outline's homology fit trims the leak, the region is segmented again with
+    # its mirror image as a guide, and the outline follows the vase
+    from sorjax import _extract as X
+
+    region, vase = vase_region()
+    rng = np.random.default_rng(1)
+    img = np.where(vase[..., None], np.array([150.0, 140.0, 30.0]), np.array([120.0, 120.0, 120.0]))
+    img = np.clip(img + rng.normal(0, 3.0, img.shape), 0, 255).astype(np.uint8)
+    H, W = region.shape
+    seg = [(0, (0, 0, W - 1, H - 1), (0, 0, W, H), region, math.nan)]
+    exact = sorjax.outlines_from_mask(vase.astype(np.float64))[0]
+
+    def outline(**opts):
+        with monkeypatch.context() as m:
+            m.setattr(T, "DetectOptions", functools.partial(T.DetectOptions, **opts))
+            out = X._finish_all(X._as_bgr(img), seg, refine=True, min_area=100.0, smooth=1.0, border="refuse")
+        assert len(out) == 1
+        return out[0]
+
+    leaky = outline(recut_inliers=0.0)  # no re-cut: the outline keeps the leak
+    cut = outline()
+    assert rms_to(leaky, exact) > 3.0 and leaky.outline_error > 1.0
+    assert rms_to(cut, exact) < 0.4
+    assert cut.outline_error < T.DetectOptions().recut_gain * leaky.outline_error
+    assert cut.outline_error > 0.5 * rms_to(cut, exact)  # the declared error stays honest
+    # a region without a leak is left as it was (its fit trims nothing)
+    clean = [(0, (0, 0, W - 1, H - 1), (0, 0, W, H), vase, math.nan)]
+    a = X._finish_all(X._as_bgr(img), clean, refine=True, min_area=100.0, smooth=1.0, border="refuse")[0]
+    assert rms_to(a, exact) < 0.4
+
+
 def test_the_outline_error_counts_what_the_symmetry_fit_trimmed():
     # an egg-shaped outline with a 10 px bump on one side (a leak): the robust fit
     # trims the bump, but the outline's declared error must not
