@@ -35,7 +35,9 @@ once trimmed, but not before), is cut again by its own symmetry
 (:func:`symmetric_recut`): where the region and its mirror image under the fitted
 homology disagree, GrabCut starts from background, so that a one-sided leak (a
 shadow, a patch of table) or bite is dropped or filled by the colours, and the judge
-looks again.  Of symmetric segmentations
+looks again.  The refined full-resolution outline is cut the same way when its fit
+trims more than ``1 - recut_inliers`` of it (:func:`mirror_grabcut`, called by
+``sorjax._extract._finish_all``, boxes included).  Of symmetric segmentations
 that overlap (by more than ``overlap`` of the smaller) the largest is kept: a part of an
 object (one bulb of a lying vase) may be symmetric too.  Each proposal dropped that
 overlaps no kept object is reported with its reason.

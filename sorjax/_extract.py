@@ -1173,9 +1173,14 @@ def _finish_all(src: _Image, segs, *, refine, min_area, smooth, border, iteratio
     DetectOptions.recut_inliers`` of it (a one-sided leak or bite at full resolution) is
     segmented again with its mirror image as a guide (:func:`sorjax._detect.mirror_grabcut`,
     ``iterations`` of GrabCut) and refined again; the new outline replaces it when its
-    estimated error is at most ``recut_gain`` times the old one.  On the photo-like
-    renders (:func:`sorjax.render.random_photo_set` seeds 100-109, one camera, 4 images)
-    RECUT_NUMBERS."""
+    estimated error is at most ``recut_gain`` times the old one.  A kept region's re-cut
+    at the reduced scale (:func:`sorjax._detect.symmetric_recut`) does not see the leaks
+    of the full-resolution GrabCut (a vase 4.5 px RMS from its silhouette, 12 % of it
+    trimmed: 0.28 px after).  On the photo-like renders
+    (:func:`sorjax.render.random_photo_set` seeds 100-109, one camera, 4 images each)
+    the objects found went from 47 to 49 of 102 and the median outline RMS from 0.47 to
+    0.43 px; where GrabCut's colours cannot tell a leak from the object (a grey bottle
+    neck before a grey box), the outline stays as it was."""
     from ._detect import DetectOptions, ImageOutline, mirror_grabcut, needs_recut, outline_quality
 
     o = DetectOptions()
