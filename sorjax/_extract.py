@@ -1315,7 +1315,7 @@ def outlines_from_image(
             if sg is not None:
                 segs.append((k, b) + sg + (math.nan,))
         out = _finish_all(src, segs, refine=refine, min_area=min_area, smooth=smooth, border=border,
-                      iterations=int(iterations))
+                          iterations=int(iterations))
         if not out:
             raise ValueError(
                 f"no object outline could be extracted from any of the {len(bxs)} boxes (see the "
