@@ -1164,7 +1164,7 @@ def _refined(src: _Image, k, b, w, fg, *, inner, min_area, smooth, border, o):
     return p, stats, outline_homology(p)
 
 
-def _finish_all(src: _Image, segs, *, refine, min_area, smooth, border, iterations: int = 5) -> list[np.ndarray]:
+def _finish_all(src: _Image, segs, *, refine, min_area, smooth, border, iterations: int) -> list[np.ndarray]:
     """Outlines of the segmented objects ``(index, box, window, fg, symmetry_rms)`` of one
     image, with one unmixing band for all, each moved onto the image's edges when
     ``refine`` (:func:`sorjax._detect.refine_to_edges`), as :class:`ImageOutline` arrays.
