@@ -19,9 +19,12 @@ from several cues, because no single one survives every background:
 A region is a proposal when its area lies between ``min_area_frac`` and
 ``max_area_frac`` of the image, it keeps clear of the border band and its solidity
 (area / convex hull area) is at least ``min_solidity``; proposals whose boxes overlap by
-more than ``same_iou`` are one.  Each proposal is segmented at full resolution by
+more than ``same_iou`` are one.  Each proposal is segmented on the reduced image by
 GrabCut from its box grown by ``box_grow`` (as for a user's box), and judged by the
-symmetry of its outline: the harmonic homology fitted to it (:func:`sorjax.fit_homology`,
+symmetry of its outline (a segmentation refused as not symmetric is tried again from
+the box grown by each of ``retry_grow``: the margin decides GrabCut's background
+sample, and a metal or glossy object on a table of like colour is cut whole from
+one margin and not from another): the harmonic homology fitted to it (:func:`sorjax.fit_homology`,
 robust) must map the outline onto itself within ``symmetry_px`` px RMS (or
 ``symmetry_rel`` of the outline's size when larger), over at least ``min_inliers`` of
 its samples, before trimming within ``untrimmed_factor`` times that, and it must not be
@@ -81,7 +84,7 @@ from __future__ import annotations
 import math
 import os
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -126,6 +129,10 @@ class DetectOptions:
     recut_inliers: float = 0.97  # a kept segmentation whose homology fit trims more is re-cut by its symmetry
     recut_px: float = 2.0  # reduced px: the sure-foreground margin and background band of the re-cut
     recut_gain: float = 0.8  # the re-cut replaces the segmentation when its untrimmed residual is this much lower
+    # a proposal whose segmentation is not symmetric is segmented again from its box grown by each of these
+    # (instead of box_grow) until one is kept: GrabCut's colour models, and so its cut of a glossy or metal
+    # object against a table of like colour, change with the background sample the margin gives
+    retry_grow: tuple = (0.08, 0.3)
     # edge refinement
     reach: float = 2.5
     side_px: float = 1.5  # the colours on each side: means over reach to reach + side_px px from the outline
@@ -472,21 +479,22 @@ def symmetric_recut(sm: np.ndarray, win, fg: np.ndarray, hom, iterations: int, o
 
 
 def _judge_or_recut(sm, win, fg, iterations: int, o: DetectOptions):
-    """``(ok, reason if not, segmentation, trimmed RMS residual px)`` of the region
-    ``fg`` in the window ``win`` of the reduced image ``sm``: :func:`judge`, and
+    """``(ok, reason if not, segmentation, trimmed RMS residual px, its limit px)`` of the
+    region ``fg`` in the window ``win`` of the reduced image ``sm``: :func:`judge`, and
     :func:`symmetric_recut` for a region that is symmetric once trimmed (kept, or
     refused as a leak).  Regions further from symmetric are not re-cut: on the photo
     sets that found no object more and added fragments of objects (a bowl's halves
     between its painted bands)."""
     p, hom = symmetry_of(fg, win[:2])
     if p is None:
-        return False, "no outline", fg, math.inf
+        return False, "no outline", fg, math.inf, math.inf
+    limit = symmetry_limit(p, o)
     ok, why, rms = judge(p, hom, o)
-    if hom is not None and np.isfinite(rms) and rms <= symmetry_limit(p, o):
+    if hom is not None and np.isfinite(rms) and rms <= limit:
         cut = symmetric_recut(sm, win, fg, hom, iterations, o, judged_ok=ok)
         if cut is not None:
-            return True, "", cut[0], cut[1]
-    return ok, why, fg, rms
+            return True, "", cut[0], cut[1], limit
+    return ok, why, fg, rms, limit
 
 
 def _mask_iou(a, b, smaller: bool = False) -> float:
@@ -550,13 +558,12 @@ def find_objects(img: np.ndarray, *, iterations: int, min_area: float, o: Detect
     h, w = sm.shape[:2]
     area_min = max(min_area * s * s, 16.0)
 
-    def look(proposal):
-        """``(window, fg or None, why it was dropped or its trimmed RMS residual)`` of one proposal."""
-        cue, pbox = proposal
-        where = (f"x {pbox[0] / s:.0f}..{(pbox[2] + 1) / s - 1:.0f}, y {pbox[1] / s:.0f}..{(pbox[3] + 1) / s - 1:.0f} "
-                 f"({cue} cue)")
+    def look_with(pbox, where, og):
+        """``(window, fg or None, why it was dropped or its trimmed RMS residual, whether
+        the segmentation was refused as not symmetric)`` of the proposal box ``pbox``
+        segmented with the options ``og``."""
         for _ in range(o.grow_rounds + 1):
-            win, fg, cut = _segment_region(sm, pbox, iterations, o)
+            win, fg, cut = _segment_region(sm, pbox, iterations, og)
             if fg.sum() < area_min or not cut or "image border" in cut:
                 break
             # part of a larger object (a bottle's body without its neck): look further that way
@@ -566,12 +573,27 @@ def find_objects(img: np.ndarray, *, iterations: int, min_area: float, o: Detect
                     min(w - 1, pbox[2] + int(o.grow_step * bw)) if "right" in cut else pbox[2],
                     min(h - 1, pbox[3] + int(o.grow_step * bh)) if "bottom" in cut else pbox[3])
         if fg.sum() < area_min:
-            return win, None, f"a region at {where}: GrabCut found no object in it"
+            return win, None, f"a region at {where}: GrabCut found no object in it", False
         if cut:
             return win, fg, (f"a region at {where}: its segmentation runs out of the region ({', '.join(cut)}): "
-                             "part of a larger region, or background")
-        ok, why, fg, rms = _judge_or_recut(sm, win, fg, iterations, o)
-        return win, fg, (rms if ok else f"a region at {where}: {why}")
+                             "part of a larger region, or background"), False
+        ok, why, fg, rms, limit = _judge_or_recut(sm, win, fg, iterations, og)
+        return win, fg, (rms if ok else f"a region at {where}: {why}"), limit < rms < math.inf
+
+    def look(proposal):
+        """``(window, fg or None, why it was dropped or its trimmed RMS residual)`` of one
+        proposal: segmented from its box grown by ``box_grow``, and, when that
+        segmentation is not symmetric, by each of ``retry_grow`` in turn until one is
+        kept (the reason given is the first segmentation's)."""
+        cue, pbox = proposal
+        where = (f"x {pbox[0] / s:.0f}..{(pbox[2] + 1) / s - 1:.0f}, y {pbox[1] / s:.0f}..{(pbox[3] + 1) / s - 1:.0f} "
+                 f"({cue} cue)")
+        first = win, fg, res, retry = look_with(pbox, where, o)
+        for grow in o.retry_grow if retry else ():
+            win, fg, res, _ = look_with(pbox, where, replace(o, box_grow=grow))
+            if not isinstance(res, str):
+                return win, fg, res
+        return first[:3]
 
     # each proposal is segmented and judged on its own, side by side (OpenCV's GrabCut
     # releases the GIL); the proposals are then taken in order as before
