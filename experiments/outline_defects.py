@@ -90,6 +90,9 @@ def main(argv=None):
           f"{np.median(col['unflagged']):.3f} px")
     print(f"  points beyond 1 px: {100 * beyond / n:.1f} %; flagged by symmetry: {100 * col['flagged'].sum() / n:.1f} %, "
           f"holding {100 * col['flagged_beyond'].sum() / max(beyond, 1):.0f} % of the points beyond 1 px")
+    ratio = col["rms"] / col["declared"]
+    print(f"  actual / declared error: median {np.nanmedian(ratio):.2f}, more than 2x for {np.sum(ratio > 2)}, "
+          f"more than 5x for {np.sum(ratio > 5)} of {len(rows)}")
     for lim in LIMITS:
         keep = ~(col["declared"] > lim)
         print(f"  declared error <= {lim:g} px: {keep.sum()} of {len(rows)} outlines kept, "

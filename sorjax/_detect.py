@@ -562,16 +562,16 @@ def find_objects(img: np.ndarray, *, iterations: int, min_area: float, o: Detect
         """``(window, fg or None, why it was dropped or its trimmed RMS residual, whether
         the segmentation was refused as not symmetric)`` of the proposal box ``pbox``
         segmented with the options ``og``."""
-        for _ in range(o.grow_rounds + 1):
+        for _ in range(og.grow_rounds + 1):
             win, fg, cut = _segment_region(sm, pbox, iterations, og)
             if fg.sum() < area_min or not cut or "image border" in cut:
                 break
             # part of a larger object (a bottle's body without its neck): look further that way
             bw, bh = pbox[2] - pbox[0] + 1, pbox[3] - pbox[1] + 1
-            pbox = (max(0, pbox[0] - int(o.grow_step * bw)) if "left" in cut else pbox[0],
-                    max(0, pbox[1] - int(o.grow_step * bh)) if "top" in cut else pbox[1],
-                    min(w - 1, pbox[2] + int(o.grow_step * bw)) if "right" in cut else pbox[2],
-                    min(h - 1, pbox[3] + int(o.grow_step * bh)) if "bottom" in cut else pbox[3])
+            pbox = (max(0, pbox[0] - int(og.grow_step * bw)) if "left" in cut else pbox[0],
+                    max(0, pbox[1] - int(og.grow_step * bh)) if "top" in cut else pbox[1],
+                    min(w - 1, pbox[2] + int(og.grow_step * bw)) if "right" in cut else pbox[2],
+                    min(h - 1, pbox[3] + int(og.grow_step * bh)) if "bottom" in cut else pbox[3])
         if fg.sum() < area_min:
             return win, None, f"a region at {where}: GrabCut found no object in it", False
         if cut:
