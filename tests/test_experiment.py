@@ -8,6 +8,7 @@ import pytest
 
 from sorjax.cli import main
 from sorjax.experiment import ConfigError, load_config, parse_config, run_experiment, run_trial, trial_seed
+from sorjax.experiment._trials import TrialProgram, run_batch
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
@@ -135,24 +136,40 @@ def test_end_to_end_run_directory_and_determinism(tmp_path):
     s = next(x for x in res.summary if x["row"] == 0 and x["method"] == "IIb")
     np.testing.assert_allclose(s["rms"], np.sqrt(np.mean(e**2, axis=0)))
 
-    # determinism: one trial re-run on its own gives the same numbers; another seed does not
+    # determinism: each trial's numbers follow from its seed alone, not from where it
+    # sits in a chunk (the same compiled program, the tasks in reverse order)
+    tasks = [(r, row, t) for r, row in enumerate(cfg.rows()) for t in range(cfg.trials)]
+    program = TrialProgram(cfg)  # one program for the re-runs (the seed is not part of it)
+    again = run_batch(cfg, tasks[::-1], program)[::-1]
+    for a, b in zip(again, recs):
+        assert a["seed"] == b["seed"]
+        for m in ("IIb", "bundle-unit"):
+            np.testing.assert_allclose(a["methods"][m]["estimate"], b["methods"][m]["estimate"], rtol=1e-10)
+    other = run_batch(cfg.replace(seed=4), tasks, program)
+    assert other[3]["methods"]["IIb"]["estimate"] != recs[3]["methods"]["IIb"]["estimate"]
+
+
+@pytest.mark.slow
+def test_a_trial_run_alone_equals_the_same_trial_in_a_chunk():
+    """run_trial (a chunk of one: another compiled program) gives the numbers the
+    trial had in a chunk of four, to round-off."""
+    cfg = parse_config(__import__("tomllib").loads(TINY))
+    tasks = [(r, row, t) for r, row in enumerate(cfg.rows()) for t in range(cfg.trials)]
+    recs = run_batch(cfg, tasks)
     again = run_trial(cfg, 1, cfg.rows()[1], 1)
     assert again["seed"] == recs[3]["seed"]
-    # the same trial alone (another chunk size, so another compiled loop): equal to round-off
     for m in ("IIb", "bundle-unit"):
         np.testing.assert_allclose(again["methods"][m]["estimate"], recs[3]["methods"][m]["estimate"], rtol=1e-10)
-    other = run_trial(cfg.replace(seed=4), 1, cfg.rows()[1], 1)
-    assert other["methods"]["IIb"]["estimate"] != recs[3]["methods"]["IIb"]["estimate"]
 
 
 def test_cli_experiment(tmp_path, capsys):
+    # TINY's methods and trial count: the compiled program of the run above
     cfg = tmp_path / "one.toml"
-    cfg.write_text(TINY.replace('name = "tiny"', 'name = "one"').replace("[0.5, 1.0]", "0.7").replace(
-        '["IIb", "bundle-unit"]', '["I", "IIb"]'))
-    assert main(["experiment", str(cfg), "--out", str(tmp_path / "runs"), "--trials", "1", "--workers", "1",
+    cfg.write_text(TINY.replace('name = "tiny"', 'name = "one"'))
+    assert main(["experiment", str(cfg), "--out", str(tmp_path / "runs"), "--trials", "2", "--workers", "1",
                  "--quiet"]) == 0
     out = capsys.readouterr().out
-    assert "| 700 | 0.7 |" in out and "wrote" in out
+    assert "| 700 | 0.5 |" in out and "| 700 | 1 |" in out and "wrote" in out
     assert len(list((tmp_path / "runs" / "one").iterdir())) == 1
 
 

@@ -42,8 +42,10 @@ def scene():
 
 @pytest.fixture(scope="module")
 def calibration(scene):
+    """At calibrate's default resolution (the compiled program the other modules use;
+    another resolution is another program of about a minute to compile)."""
     _, outs, *_ = scene
-    return sorjax.calibrate(outs, n_points=N_POINTS, n_samples=N_SAMPLES, outline_error=0.0)
+    return sorjax.calibrate(outs, outline_error=0.0)
 
 
 # ------------------------------------------------------------------ jit and vmap
@@ -93,11 +95,17 @@ def test_jit_vmap_bundle_residuals(scene):
 
 
 def test_jit_calibrated_intrinsics(scene, calibration):
-    _, _, P, *_ = scene
-    eager = losses.calibrated_intrinsics(P, calibration, N_SAMPLES)  # the Calibration form
+    _, outs, *_ = scene
+    P = jnp.stack([sorjax.make_outline(o).points for o in outs])  # the calibration's points and samples
+    eager = losses.calibrated_intrinsics(P, calibration)  # the Calibration form
     np.testing.assert_allclose(np.asarray(eager), [calibration.fu, calibration.fv, calibration.u0, calibration.v0],
                                rtol=1e-6)
-    _close(_fit(P, losses.BundleStart.of(calibration)), eager)
+    _close(jax.jit(losses.calibrated_intrinsics)(P, losses.BundleStart.of(calibration)), eager)
+    # at another resolution, started from the calibration: near it, the same under jit
+    P, *_ = scene[2:]
+    coarse = losses.calibrated_intrinsics(P, calibration, N_SAMPLES)
+    np.testing.assert_allclose(np.asarray(coarse), np.asarray(eager), rtol=0, atol=0.01 * 700.0)  # 1 % of f
+    _close(_fit(P, losses.BundleStart.of(calibration)), coarse)
 
 
 @pytest.mark.slow
