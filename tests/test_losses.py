@@ -102,7 +102,7 @@ def test_jit_calibrated_intrinsics(scene, calibration):
                                rtol=1e-6)
     _close(jax.jit(losses.calibrated_intrinsics)(P, losses.BundleStart.of(calibration)), eager)
     # at another resolution, started from the calibration: near it, the same under jit
-    P, *_ = scene[2:]
+    P = scene[2]
     coarse = losses.calibrated_intrinsics(P, calibration, N_SAMPLES)
     np.testing.assert_allclose(np.asarray(coarse), np.asarray(eager), rtol=0, atol=0.01 * 700.0)  # 1 % of f
     _close(_fit(P, losses.BundleStart.of(calibration)), coarse)
