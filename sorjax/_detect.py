@@ -21,10 +21,10 @@ A region is a proposal when its area lies between ``min_area_frac`` and
 (area / convex hull area) is at least ``min_solidity``; proposals whose boxes overlap by
 more than ``same_iou`` are one.  Each proposal is segmented on the reduced image by
 GrabCut from its box grown by ``box_grow`` (as for a user's box), and judged by the
-symmetry of its outline (a segmentation refused as not symmetric is tried again from
-the box grown by each of ``retry_grow``: the margin decides GrabCut's background
-sample, and a metal or glossy object on a table of like colour is cut whole from
-one margin and not from another): the harmonic homology fitted to it (:func:`sorjax.fit_homology`,
+symmetry of its outline (a segmentation refused as not symmetric, or running out of
+its box after ``grow_rounds`` growths, is tried again from the box grown by each of
+``retry_grow``: the margin decides GrabCut's background sample, and a metal or glossy
+object on a table of like colour is cut whole from one margin and not from another): the harmonic homology fitted to it (:func:`sorjax.fit_homology`,
 robust) must map the outline onto itself within ``symmetry_px`` px RMS (or
 ``symmetry_rel`` of the outline's size when larger), over at least ``min_inliers`` of
 its samples, before trimming within ``untrimmed_factor`` times that, and it must not be
@@ -129,9 +129,10 @@ class DetectOptions:
     recut_inliers: float = 0.97  # a kept segmentation whose homology fit trims more is re-cut by its symmetry
     recut_px: float = 2.0  # reduced px: the sure-foreground margin and background band of the re-cut
     recut_gain: float = 0.8  # the re-cut replaces the segmentation when its untrimmed residual is this much lower
-    # a proposal whose segmentation is not symmetric is segmented again from its box grown by each of these
-    # (instead of box_grow) until one is kept: GrabCut's colour models, and so its cut of a glossy or metal
-    # object against a table of like colour, change with the background sample the margin gives
+    # a proposal whose segmentation is not symmetric, or runs out of its box (grown grow_rounds times) other
+    # than at the image border, is segmented again from its box grown by each of these (instead of box_grow)
+    # until one is kept: GrabCut's colour models, and so its cut of a glossy or metal object against a table
+    # of like colour, change with the background sample the margin gives
     retry_grow: tuple = (0.08, 0.3)
     # edge refinement
     reach: float = 2.5
@@ -560,8 +561,9 @@ def find_objects(img: np.ndarray, *, iterations: int, min_area: float, o: Detect
 
     def look_with(pbox, where, og):
         """``(window, fg or None, why it was dropped or its trimmed RMS residual, whether
-        the segmentation was refused as not symmetric)`` of the proposal box ``pbox``
-        segmented with the options ``og``."""
+        another margin may do better: the segmentation was refused as not symmetric or
+        runs out of its box other than at the image border)`` of the proposal box
+        ``pbox`` segmented with the options ``og``."""
         for _ in range(og.grow_rounds + 1):
             win, fg, cut = _segment_region(sm, pbox, iterations, og)
             if fg.sum() < area_min or not cut or "image border" in cut:
@@ -576,15 +578,15 @@ def find_objects(img: np.ndarray, *, iterations: int, min_area: float, o: Detect
             return win, None, f"a region at {where}: GrabCut found no object in it", False
         if cut:
             return win, fg, (f"a region at {where}: its segmentation runs out of the region ({', '.join(cut)}): "
-                             "part of a larger region, or background"), False
+                             "part of a larger region, or background"), "image border" not in cut
         ok, why, fg, rms, limit = _judge_or_recut(sm, win, fg, iterations, og)
         return win, fg, (rms if ok else f"a region at {where}: {why}"), limit < rms < math.inf
 
     def look(proposal):
         """``(window, fg or None, why it was dropped or its trimmed RMS residual)`` of one
         proposal: segmented from its box grown by ``box_grow``, and, when that
-        segmentation is not symmetric, by each of ``retry_grow`` in turn until one is
-        kept (the reason given is the first segmentation's)."""
+        segmentation is not symmetric or runs out of its box, by each of ``retry_grow``
+        in turn until one is kept (the reason given is the first segmentation's)."""
         cue, pbox = proposal
         where = (f"x {pbox[0] / s:.0f}..{(pbox[2] + 1) / s - 1:.0f}, y {pbox[1] / s:.0f}..{(pbox[3] + 1) / s - 1:.0f} "
                  f"({cue} cue)")

@@ -108,6 +108,28 @@ def test_a_segmentation_that_is_not_symmetric_is_tried_again_with_other_margins(
     assert sorted(again)[-2] >= 0.95  # two of the three objects, within a reduced pixel or so
 
 
+def test_a_segmentation_that_runs_out_of_its_box_is_tried_again_with_other_margins():
+    # random_photo_set(101)'s second image (1280x960): a metal wine glass whose GrabCut
+    # from its proposal's box grown by box_grow leaks out to the box's sides (grown twice
+    # that way, still cut); from the box grown by another of retry_grow it is whole
+    from dataclasses import replace
+
+    r = R.random_photo_set(101, cameras=1, images=2).cameras[0].renders[1]
+    glass = r.objects[1]
+    assert glass.name == "wine_glass" and "metal" in r.description
+
+    def matched(o):
+        objects, notes, s = T.find_objects(r.image, iterations=5, min_area=400.0, o=o, threads=2)
+        h, w = T._reduce(r.image, o.max_side)[0].shape[:2]
+        m = cv2.resize((glass.coverage >= 0.5).astype(np.uint8), (w, h), interpolation=cv2.INTER_AREA) > 0
+        return max((float(np.sum(g & m) / np.sum(g | m)) for g, _ in objects), default=0.0), notes
+
+    once, notes = matched(replace(T.DetectOptions(), retry_grow=()))
+    assert once < 0.5 and any("runs out of the region (left, right)" in n for n in notes)
+    again, notes = matched(T.DetectOptions())
+    assert again >= 0.95 and not any("runs out of the region (left, right)" in n for n in notes)
+
+
 def test_outlines_above_the_error_limit_are_dropped_with_a_reason(tex, auto, monkeypatch):
     import functools
 
