@@ -85,6 +85,19 @@ def test_proposals_side_by_side_give_the_same_objects(tex):
         assert np.array_equal(ra, rb) and sa == sb
 
 
+def found_ious(r, o):
+    """``(IoU per object, notes)``: for each object of the rendering ``r``, the best
+    intersection over union of an object :func:`find_objects` keeps (options ``o``) with
+    its true mask, on the reduced image."""
+    objects, notes, s = T.find_objects(r.image, iterations=5, min_area=400.0, o=o, threads=2)
+    h, w = T._reduce(r.image, o.max_side)[0].shape[:2]
+    out = []
+    for ob in r.objects:
+        m = cv2.resize((ob.coverage >= 0.5).astype(np.uint8), (w, h), interpolation=cv2.INTER_AREA) > 0
+        out.append(max((float(np.sum(g & m) / np.sum(g | m)) for g, _ in objects), default=0.0))
+    return out, notes
+
+
 def test_a_segmentation_that_is_not_symmetric_is_tried_again_with_other_margins():
     # random_photo_set(100)'s second image (800x600): two metal and glossy objects on a
     # tiled table that GrabCut cuts asymmetrically from their proposals' boxes grown by
@@ -92,19 +105,9 @@ def test_a_segmentation_that_is_not_symmetric_is_tried_again_with_other_margins(
     from dataclasses import replace
 
     r = R.random_photo_set(100, cameras=1, images=2).cameras[0].renders[1]
-
-    def matched(o):
-        objects, notes, s = T.find_objects(r.image, iterations=5, min_area=400.0, o=o, threads=2)
-        h, w = T._reduce(r.image, o.max_side)[0].shape[:2]
-        out = []
-        for ob in r.objects:
-            m = cv2.resize((ob.coverage >= 0.5).astype(np.uint8), (w, h), interpolation=cv2.INTER_AREA) > 0
-            out.append(max((float(np.sum(g & m) / np.sum(g | m)) for g, _ in objects), default=0.0))
-        return out, notes
-
-    once, notes = matched(replace(T.DetectOptions(), retry_grow=()))
+    once, notes = found_ious(r, replace(T.DetectOptions(), retry_grow=()))
     assert max(once) < 0.5 and any("not symmetric" in n for n in notes)
-    again, _ = matched(T.DetectOptions())
+    again, _ = found_ious(r, T.DetectOptions())
     assert sorted(again)[-2] >= 0.95  # two of the three objects, within a reduced pixel or so
 
 
@@ -115,19 +118,11 @@ def test_a_segmentation_that_runs_out_of_its_box_is_tried_again_with_other_margi
     from dataclasses import replace
 
     r = R.random_photo_set(101, cameras=1, images=2).cameras[0].renders[1]
-    glass = r.objects[1]
-    assert glass.name == "wine_glass" and "metal" in r.description
-
-    def matched(o):
-        objects, notes, s = T.find_objects(r.image, iterations=5, min_area=400.0, o=o, threads=2)
-        h, w = T._reduce(r.image, o.max_side)[0].shape[:2]
-        m = cv2.resize((glass.coverage >= 0.5).astype(np.uint8), (w, h), interpolation=cv2.INTER_AREA) > 0
-        return max((float(np.sum(g & m) / np.sum(g | m)) for g, _ in objects), default=0.0), notes
-
-    once, notes = matched(replace(T.DetectOptions(), retry_grow=()))
-    assert once < 0.5 and any("runs out of the region (left, right)" in n for n in notes)
-    again, notes = matched(T.DetectOptions())
-    assert again >= 0.95 and not any("runs out of the region (left, right)" in n for n in notes)
+    assert r.objects[1].name == "wine_glass" and "metal" in r.description
+    once, notes = found_ious(r, replace(T.DetectOptions(), retry_grow=()))
+    assert once[1] < 0.5 and any("runs out of the region (left, right)" in n for n in notes)
+    again, notes = found_ious(r, T.DetectOptions())
+    assert again[1] >= 0.95 and not any("runs out of the region (left, right)" in n for n in notes)
 
 
 def test_outlines_above_the_error_limit_are_dropped_with_a_reason(tex, auto, monkeypatch):
