@@ -24,9 +24,10 @@ GrabCut from its box grown by ``box_grow`` (as for a user's box), and judged by 
 symmetry of its outline (a segmentation refused as not symmetric, or running out of
 its box after ``grow_rounds`` growths, is tried again from the box grown by each of
 ``retry_grow``: the margin decides GrabCut's background sample, and a metal or glossy
-object on a table of like colour is cut whole from one margin and not from another): the harmonic homology fitted to it (:func:`sorjax.fit_homology`,
-robust) must map the outline onto itself within ``symmetry_px`` px RMS (or
-``symmetry_rel`` of the outline's size when larger), over at least ``min_inliers`` of
+object on a table of like colour is cut whole from one margin and not from another):
+the harmonic homology fitted to it (:func:`sorjax.fit_homology`, robust) must map the
+outline onto itself within ``symmetry_px`` px RMS (or ``symmetry_rel`` of the outline's
+size when larger), over at least ``min_inliers`` of
 its samples, before trimming within ``untrimmed_factor`` times that, and it must not be
 a polygon of at most ``polygon_vertices`` straight sides (within ``polygon_rel`` of its
 size plus ``polygon_px``, the rounding of its corners by blur and segmentation: a tile,
