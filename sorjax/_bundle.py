@@ -460,17 +460,42 @@ def pixel_params(k, problem: BundleProblem, T):
     return p if d is None else jnp.concatenate([p, d])
 
 
-def residual_jacobian(y, problem: BundleProblem, feet=None):
+def residual_jacobian(y, problem: BundleProblem, feet=None, normals: bool = False):
     """``(J, r, feet)`` at ``y``: the Jacobian of the stacked residuals
     (:func:`residuals`) with respect to ``y`` flattened (``k`` first, then each view's
     ``(theta, rho)``), the residuals (normalised units) and the closest-point
     parameters they read (:func:`foot_parameters`; searched once here unless given),
-    held fixed as hints for both."""
+    held fixed as hints for both.
+
+    ``normals`` (static): also return ``a`` (V, N), each weighted residual's
+    sensitivity to its own sample moving along the outline's outward normal (what
+    :func:`noise_geometry_at` reads), as one more column of the same forward-mode pass:
+    ``(J, r, feet, a)``.  One traced evaluation of the residuals instead of three."""
     flat, unravel = jax.flatten_util.ravel_pytree(y)
     if feet is None:
         feet = foot_parameters(y, problem)  # searched once; exact hints for J, r and the mirror pairs
-    J = jax.jacfwd(lambda f: residuals(unravel(f), problem, feet))(flat)
-    return J, residuals(y, problem, feet), feet
+    if not normals:
+        def res(f):
+            r = residuals(unravel(f), problem, feet)
+            return r, r
+
+        J, r = jax.jacfwd(res, has_aux=True)(flat)  # the residuals from the same pass
+        return J, r, feet
+    nu = problem_normals(problem)
+
+    def res_moved(f, s):  # the samples moved by s along their normals
+        moved = BundleProblem(problem.fields, problem.samples + s * nu, problem.weights, problem.aspect,
+                              problem.n_dist, problem.fixed)
+        r = residuals(unravel(f), moved, feet)
+        return r, r
+
+    (J, a), r = jax.jacfwd(res_moved, argnums=(0, 1), has_aux=True)(flat, jnp.zeros((), flat.dtype))
+    return J, r, feet, a.reshape(problem.weights.shape)
+
+
+def problem_normals(problem: BundleProblem) -> Float[Array, "V N 2"]:
+    """The outward unit normals of the outlines at their samples."""
+    return jax.vmap(lambda f: sample_normals(f, problem.samples.shape[1]))(problem.fields)
 
 
 def project_out(A, B):
@@ -520,14 +545,14 @@ def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Optio
     step = _step_length(J, r, s2)
     scale = 1.0 / T[0, 0]
     smooth = smoothed_problem(problem, options.covariance_smooth_px, scale)
-    Js, _, feet_s = residual_jacobian(y, smooth)
+    Js, _, feet_s, a_s = residual_jacobian(y, smooth, normals=True)
     # the intrinsics' columns with the per-view parameters' directions projected out
     G = project_out(Js[:, :nk], Js[:, nk:])
     F = G.T @ G  # = the Schur complement J_k^T J_k - J_k^T J_a (J_a^T J_a)^-1 J_a^T J_k
     lam, U = jnp.linalg.eigh(0.5 * (F + F.T))
     null = lam <= NULL_EIGENVALUE * jnp.max(jnp.abs(lam))
     F_inv = (U * jnp.where(null, 0.0, 1.0 / jnp.where(null, 1.0, lam))) @ U.T
-    geo = noise_geometry_at(y, smooth, feet_s, scale)
+    geo = noise_geometry_at(y, smooth, feet_s, scale, a_s)
     ell, level = estimate_noise(geo, r.reshape(geo.a.shape), J, options.noise_ell_min_px, options.noise_ell_max_px)
     meat = level * noise_meat(G, unit_blocks(geo, ell))
     cov_k = F_inv @ meat @ F_inv
@@ -543,13 +568,14 @@ def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Optio
     return cov, s2, step, ell
 
 
-def noise_blocks(y, problem: BundleProblem, feet, T, ell, s2) -> Float[Array, "V N N"]:
+def noise_blocks(y, problem: BundleProblem, feet, T, ell, s2, a=None) -> Float[Array, "V N N"]:
     """The residuals' covariance per view (normalised units^2) under the outline noise
     model (:mod:`sorjax._noise`) with correlation length ``ell`` px (the bundle's
     estimate, :attr:`BundleOut.noise_ell`), its level from the residual variance
     ``s2`` of the model fitted at ``y``: ``sigma_n^2 = s2 n / tr S`` (``n`` samples
-    counted).  What the model checks weigh their scores with."""
-    geo = noise_geometry_at(y, problem, feet, 1.0 / T[0, 0])
+    counted).  What the model checks weigh their scores with.  ``a``: as for
+    :func:`noise_geometry_at`."""
+    geo = noise_geometry_at(y, problem, feet, 1.0 / T[0, 0], a)
     S = unit_blocks(geo, ell)
     tr = jnp.sum(jnp.trace(S, axis1=1, axis2=2))
     return S * (s2 * jnp.sum(problem.weights) / jnp.maximum(tr, 1e-300))
@@ -578,19 +604,19 @@ def smoothed_problem(problem: BundleProblem, smooth_px, scale) -> BundleProblem:
     return BundleProblem(fields, samples, problem.weights, problem.aspect, problem.n_dist, problem.fixed)
 
 
-def noise_geometry_at(y, problem: BundleProblem, feet, scale) -> NoiseGeometry:
+def noise_geometry_at(y, problem: BundleProblem, feet, scale, a=None) -> NoiseGeometry:
     """The outline noise model's geometry (:class:`sorjax._noise.NoiseGeometry`) of
     the residuals at ``y`` with closest-point parameters ``feet`` (V, N): each
     weighted residual's sensitivity to its own sample moving along the outward
-    normal (one JVP of :func:`residuals`), the weights and the arc lengths."""
-    M, N = problem.fields.knots.shape[1], problem.samples.shape[1]
-    nu = jax.vmap(lambda f: sample_normals(f, N))(problem.fields)
+    normal (one JVP of :func:`residuals`; ``a`` (V, N) when the caller has it from
+    :func:`residual_jacobian` with ``normals=True``), the weights and the arc lengths."""
+    M = problem.fields.knots.shape[1]
+    if a is None:
+        def moved(samples):
+            return residuals(y, BundleProblem(problem.fields, samples, problem.weights, problem.aspect,
+                                              problem.n_dist, problem.fixed), feet)
 
-    def moved(samples):
-        return residuals(y, BundleProblem(problem.fields, samples, problem.weights, problem.aspect, problem.n_dist,
-                                          problem.fixed), feet)
-
-    _, a = jax.jvp(moved, (problem.samples,), (nu,))
+        _, a = jax.jvp(moved, (problem.samples,), (problem_normals(problem),))
     spacing = jax.vmap(lambda f: knot_spacing_px(f, scale))(problem.fields)
     return noise_geometry(a.reshape(problem.weights.shape), problem.weights, feet, spacing, M)
 

@@ -59,8 +59,8 @@ from jax.scipy.special import gammaincc
 from jaxtyping import Array, Bool, Float, Int
 
 from .._bundle import (BundleProblem, fixed_chart, foot_parameters, free_intrinsics, make_problem, noise_blocks,
-                       pin_intrinsics, pixel_params, pole_polar_pairs, project_out, residual_jacobian,
-                       residual_variance, with_model)
+                       pin_intrinsics, pixel_params, pole_polar_pairs, problem_normals, project_out,
+                       residual_jacobian, residual_variance, with_model)
 from .._homology import symmetry_residuals
 from .._noise import noise_meat
 from ._options import Options
@@ -189,21 +189,25 @@ def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=N
         b1 = b1 / jnp.linalg.norm(b1)
         return b1, jnp.cross(v, b1)
 
-    def res(p, v, l, s, f, w, h):
+    def res(p, v, l, s, f, w, h, nu):  # p: the release (4,), then the samples' move along their normals
         th, rho = jnp.arctan2(l[1], l[0]) + p[0], -l[2] / jnp.linalg.norm(l[:2]) + p[1]
         b1, b2 = basis(v)
         lp = jnp.stack([jnp.cos(th), jnp.sin(th), -rho])
-        return symmetry_residuals(v + p[2] * b1 + p[3] * b2, lp, s, f, w, h)
+        r = symmetry_residuals(v + p[2] * b1 + p[3] * b2, lp, s + p[4] * nu, f, w, h)
+        return r, r
 
-    zero = jnp.zeros(4)
-    r = jax.vmap(lambda *a: res(zero, *a))(v, l, problem.samples, problem.fields, problem.weights, feet)  # (V, N)
-    J = jax.vmap(lambda *a: jax.jacfwd(res)(zero, *a))(v, l, problem.samples, problem.fields, problem.weights, feet)
+    # one forward-mode pass per view: the residuals (V, N), the releases' Jacobian (V,
+    # N, 4) and the residuals' sensitivity to their samples moving along the normals
+    # (the noise model's geometry, :func:`sorjax._bundle.noise_geometry_at`)
+    J, r = jax.vmap(lambda *a: jax.jacfwd(res, has_aux=True)(jnp.zeros(5), *a))(
+        v, l, problem.samples, problem.fields, problem.weights, feet, problem_normals(problem))
+    J, a_nu = J[..., :4], J[..., 4]
     n = jnp.sum(problem.weights, axis=1)
     n_par = jnp.sum(used) * 2 + n_free_intrinsics(aspect, fixed)
     s2 = jnp.sum(r**2) / jnp.maximum(jnp.sum(n) - n_par, 1.0)
     # the block-diagonal Jacobian of all views' releases, (V N, 4 V), for the meat
     G = (J[:, :, None, :] * jnp.eye(V)[:, None, :, None]).reshape(V * N, V * 4)
-    meat = noise_meat(G, noise_blocks(y, problem, feet, T, ell, s2))
+    meat = noise_meat(G, noise_blocks(y, problem, feet, T, ell, s2, a_nu))
     g = jnp.einsum("vnk,vn->vk", J, r)
     blocks = jax.vmap(lambda i: jax.lax.dynamic_slice(meat, (4 * i, 4 * i), (4, 4)))(jnp.arange(V))
     S = jax.vmap(lambda gi, Mi: gi @ jnp.linalg.pinv(Mi, hermitian=True) @ gi)(g, blocks)
@@ -310,7 +314,7 @@ def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, opt
     the Gauss-Newton step of the released model ``-(J^T J)^+ J^T r`` gives ``shift``
     and ``released``.  No solve: one Jacobian."""
     nk = y[0].shape[0]
-    J, r, feet = residual_jacobian(y, problem)
+    J, r, feet, a = residual_jacobian(y, problem, normals=True)
     rel = jnp.concatenate([jnp.asarray(release, bool), jnp.zeros(J.shape[1] - nk, bool)])
     Jr = jnp.where(rel[None, :], J, 0.0)
     Jh = jnp.where(rel[None, :], 0.0, J)
@@ -319,7 +323,7 @@ def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, opt
     n = jnp.sum(problem.weights)
     s2 = residual_variance(r, y, problem, q)
     g = G.T @ r
-    M = noise_meat(G, noise_blocks(y, problem, feet, T, ell, s2))
+    M = noise_meat(G, noise_blocks(y, problem, feet, T, ell, s2, a))
     S = g @ jnp.linalg.pinv(M, hermitian=True) @ g
     delta = g @ jnp.linalg.pinv(G.T @ G, hermitian=True) @ g / T[0, 0] ** 2
     p = jnp.where(q > 0, gammaincc(jnp.maximum(q, 1) / 2.0, S / 2.0), jnp.nan)
