@@ -458,11 +458,17 @@ def _infinity_z(field, samples, weights, v, l, feet, scale, options: Options):
     p, v, E = _pack(v, l)
     n = samples.shape[0]
     res = lambda p, f, s: _residuals(p, (f, s, weights, v, E, feet))[:-1]  # noqa: E731  (no barrier)
-    r = res(p, field, samples)
-    J = jax.jacfwd(res)(p, field, samples)
+    nu = sample_normals(field, n)
+
+    def moved(p, t):  # the samples moved by t along their normals
+        r = res(p, field, samples + t * nu)
+        return r, r
+
+    # one forward-mode pass: the Jacobian, the residuals and their sensitivity to the
+    # samples moving along the normals
+    (J, a), r = jax.jacfwd(moved, argnums=(0, 1), has_aux=True)(p, jnp.zeros((), samples.dtype))
     sm, sm_samples = smoothed_outline(field, n, options.covariance_smooth_px, scale)
     Js = jax.jacfwd(res)(p, sm, sm_samples)
-    _, a = jax.jvp(lambda s: res(p, field, s), (samples,), (sample_normals(field, n),))
     geo = noise_geometry(a[None], weights[None], feet[None], knot_spacing_px(field, scale)[None], field.n_knots)
     ell, level = estimate_noise(geo, r[None], J, options.noise_ell_min_px, options.noise_ell_max_px)
     A = jnp.linalg.pinv(Js.T @ Js, hermitian=True)
