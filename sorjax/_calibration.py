@@ -29,7 +29,7 @@ from .core._assess import (ASYMMETRIC, COLLAPSED_FOCAL, CONIC, DUPLICATE, MASKED
                            outline_radius, view_verdicts)
 from .core._checks import (CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, CULPRIT_VIEWS, MODEL_WIDENED,
                            ModelChecks)
-from .core._calibrate import _intrinsics, calibrate_homologies, calibrate_methods
+from .core._calibrate import _intrinsics, calibrate_homologies
 from .core._options import Options
 from .core._result import RESULTS
 from .core._viewfit import ViewHomologies
@@ -728,18 +728,16 @@ def view_homologies(homologies, n_samples: int) -> ViewHomologies:
     return ViewHomologies(**{k: np.stack([r[k] for r in rows]) for k in rows[0]})
 
 
-_SHELL_METHODS = ("I", "IIa", "IIb", "bundle")
-
-
-@jax.jit
-def _core(points, homs, aspect, options, image_size, valid, fixed=None):
-    """Every method at once (:func:`sorjax.core.calibrate_methods`): one compiled
-    program per padded view count serves all four, at the run-time cost of the three
-    cheap linear methods (a few ms) beside the one asked for.  ``fixed``: intrinsics
-    held fixed (px, NaN: free) or None (another compiled program: the one of a free
-    camera stays as it was)."""
-    return calibrate_methods(points, homs, _SHELL_METHODS, jnp.stack([aspect] * len(_SHELL_METHODS)), options=options,
-                             image_size=image_size, valid=valid, fixed=fixed)
+@functools.partial(jax.jit, static_argnames=("method",))
+def _core(points, homs, aspect, options, image_size, valid, fixed=None, *, method: str = "bundle"):
+    """One method's estimate (:func:`sorjax.core.calibrate_homologies`): one compiled
+    program per method and padded view count.  The bundle's program holds no linear
+    method beside it (the three linear methods' covariances in the same program made
+    it a quarter larger, for the one result a call returns); a linear method's program
+    holds no solver.  ``fixed``: intrinsics held fixed (px, NaN: free) or None
+    (another compiled program: the one of a free camera stays as it was)."""
+    return calibrate_homologies(points, homs, method, aspect, options=options, image_size=image_size, valid=valid,
+                                fixed=fixed)
 
 
 @functools.partial(jax.jit, static_argnames=("distortion",))
@@ -764,7 +762,7 @@ def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, opt
             np.asarray(image_size, np.float64), valid)
     fixed = None if fixed is None else np.asarray(fixed, np.float64)
     if distortion == "none":
-        r = _core(*args, fixed)[_SHELL_METHODS.index(method)]
+        r = _core(*args, fixed, method=method)
     else:
         r = _core_distorted(*args, distortion, fixed)
     r = jax.tree_util.tree_map(np.asarray, r)
