@@ -5,6 +5,7 @@ import sys
 import textwrap
 
 import jax
+import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -252,3 +253,28 @@ def test_evidence_gate_follows_outline_error():
     weak = sorjax.calibrate(outs, homologies=homs, outline_error=g / 2.7)
     assert not weak.success and np.isnan(weak.fv) and "too little perspective" in weak.message
     assert weak.perspective_px == pytest.approx(g, rel=1e-6)
+
+
+def test_one_forward_pass_gives_the_jacobian_residuals_and_normal_sensitivity(scene):
+    """``residual_jacobian(normals=True)`` (one forward-mode pass) against independent
+    evaluations: the residuals themselves, the Jacobian by central differences, and
+    each residual's sensitivity to its sample moving along the outline's normal by
+    central differences of the samples (the noise model's geometry reads it)."""
+    from sorjax._bundle import problem_normals, residual_jacobian
+
+    prob, y = problem_at_truth(scene, scene.outlines)
+    rng = np.random.default_rng(0)
+    y = (y[0] + 0.01 * rng.normal(size=4), y[1] + 0.01 * rng.normal(size=y[1].shape))  # off the optimum
+    J, r, feet, a = jax.jit(lambda y, p: residual_jacobian(y, p, normals=True))(y, prob)
+    flat, unravel = jax.flatten_util.ravel_pytree(y)
+    res = jax.jit(lambda f, s: residuals(unravel(f), BundleProblem(prob.fields, s, prob.weights, prob.aspect), feet))
+    np.testing.assert_allclose(np.asarray(r), np.asarray(res(flat, prob.samples)), rtol=1e-12, atol=1e-12)
+    h = 1e-6
+    for i in range(flat.shape[0]):
+        e = jnp.zeros_like(flat).at[i].set(h)
+        fd = (res(flat + e, prob.samples) - res(flat - e, prob.samples)) / (2 * h)
+        np.testing.assert_allclose(np.asarray(J[:, i]), np.asarray(fd), rtol=1e-5, atol=1e-6 * float(jnp.abs(J).max()))
+    nu = problem_normals(prob)
+    fd = (res(flat, prob.samples + h * nu) - res(flat, prob.samples - h * nu)) / (2 * h)
+    assert float(jnp.abs(a).max()) > 0.1  # the residuals do move with their samples
+    np.testing.assert_allclose(np.asarray(a).reshape(-1), np.asarray(fd), rtol=1e-5, atol=1e-6)
