@@ -552,7 +552,7 @@ def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Optio
     lam, U = jnp.linalg.eigh(0.5 * (F + F.T))
     null = lam <= NULL_EIGENVALUE * jnp.max(jnp.abs(lam))
     F_inv = (U * jnp.where(null, 0.0, 1.0 / jnp.where(null, 1.0, lam))) @ U.T
-    geo = noise_geometry_at(y, smooth, feet_s, scale, a_s)
+    geo = noise_geometry_at(smooth, feet_s, scale, a_s)
     ell, level = estimate_noise(geo, r.reshape(geo.a.shape), J, options.noise_ell_min_px, options.noise_ell_max_px)
     meat = level * noise_meat(G, unit_blocks(geo, ell))
     cov_k = F_inv @ meat @ F_inv
@@ -568,14 +568,14 @@ def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Optio
     return cov, s2, step, ell
 
 
-def noise_blocks(y, problem: BundleProblem, feet, T, ell, s2, a=None) -> Float[Array, "V N N"]:
+def noise_blocks(problem: BundleProblem, feet, T, ell, s2, a) -> Float[Array, "V N N"]:
     """The residuals' covariance per view (normalised units^2) under the outline noise
     model (:mod:`sorjax._noise`) with correlation length ``ell`` px (the bundle's
     estimate, :attr:`BundleOut.noise_ell`), its level from the residual variance
     ``s2`` of the model fitted at ``y``: ``sigma_n^2 = s2 n / tr S`` (``n`` samples
-    counted).  What the model checks weigh their scores with.  ``a``: as for
-    :func:`noise_geometry_at`."""
-    geo = noise_geometry_at(y, problem, feet, 1.0 / T[0, 0], a)
+    counted), ``a`` as for :func:`noise_geometry_at`.  What the model checks weigh
+    their scores with."""
+    geo = noise_geometry_at(problem, feet, 1.0 / T[0, 0], a)
     S = unit_blocks(geo, ell)
     tr = jnp.sum(jnp.trace(S, axis1=1, axis2=2))
     return S * (s2 * jnp.sum(problem.weights) / jnp.maximum(tr, 1e-300))
@@ -604,19 +604,13 @@ def smoothed_problem(problem: BundleProblem, smooth_px, scale) -> BundleProblem:
     return BundleProblem(fields, samples, problem.weights, problem.aspect, problem.n_dist, problem.fixed)
 
 
-def noise_geometry_at(y, problem: BundleProblem, feet, scale, a=None) -> NoiseGeometry:
+def noise_geometry_at(problem: BundleProblem, feet, scale, a) -> NoiseGeometry:
     """The outline noise model's geometry (:class:`sorjax._noise.NoiseGeometry`) of
-    the residuals at ``y`` with closest-point parameters ``feet`` (V, N): each
-    weighted residual's sensitivity to its own sample moving along the outward
-    normal (one JVP of :func:`residuals`; ``a`` (V, N) when the caller has it from
-    :func:`residual_jacobian` with ``normals=True``), the weights and the arc lengths."""
+    the residuals with closest-point parameters ``feet`` (V, N): ``a`` (V, N), each
+    weighted residual's sensitivity to its own sample moving along the outward normal
+    (:func:`residual_jacobian` with ``normals=True``), the weights and the arc lengths
+    (``scale`` px per normalised unit)."""
     M = problem.fields.knots.shape[1]
-    if a is None:
-        def moved(samples):
-            return residuals(y, BundleProblem(problem.fields, samples, problem.weights, problem.aspect,
-                                              problem.n_dist, problem.fixed), feet)
-
-        _, a = jax.jvp(moved, (problem.samples,), (problem_normals(problem),))
     spacing = jax.vmap(lambda f: knot_spacing_px(f, scale))(problem.fields)
     return noise_geometry(a.reshape(problem.weights.shape), problem.weights, feet, spacing, M)
 

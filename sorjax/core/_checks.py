@@ -207,7 +207,7 @@ def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=N
     s2 = jnp.sum(r**2) / jnp.maximum(jnp.sum(n) - n_par, 1.0)
     # the block-diagonal Jacobian of all views' releases, (V N, 4 V), for the meat
     G = (J[:, :, None, :] * jnp.eye(V)[:, None, :, None]).reshape(V * N, V * 4)
-    meat = noise_meat(G, noise_blocks(y, problem, feet, T, ell, s2, a_nu))
+    meat = noise_meat(G, noise_blocks(problem, feet, T, ell, s2, a_nu))
     g = jnp.einsum("vnk,vn->vk", J, r)
     blocks = jax.vmap(lambda i: jax.lax.dynamic_slice(meat, (4 * i, 4 * i), (4, 4)))(jnp.arange(V))
     S = jax.vmap(lambda gi, Mi: gi @ jnp.linalg.pinv(Mi, hermitian=True) @ gi)(g, blocks)
@@ -323,7 +323,7 @@ def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, opt
     n = jnp.sum(problem.weights)
     s2 = residual_variance(r, y, problem, q)
     g = G.T @ r
-    M = noise_meat(G, noise_blocks(y, problem, feet, T, ell, s2, a))
+    M = noise_meat(G, noise_blocks(problem, feet, T, ell, s2, a))
     S = g @ jnp.linalg.pinv(M, hermitian=True) @ g
     delta = g @ jnp.linalg.pinv(G.T @ G, hermitian=True) @ g / T[0, 0] ** 2
     p = jnp.where(q > 0, gammaincc(jnp.maximum(q, 1) / 2.0, S / 2.0), jnp.nan)
