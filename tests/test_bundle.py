@@ -89,10 +89,11 @@ def test_polish_methods_agree_and_the_remaining_step_vanishes(scene):
     gn, lm = solve(y0, prob, method="gn"), solve(y0, prob, method="lm")
     assert bool(gn[1] == lm[1]) and int(gn[2]) < int(lm[2])  # both converge, GN in fewer steps
     np.testing.assert_allclose(np.asarray(gn[0][0]), np.asarray(lm[0][0]), rtol=1e-5, atol=1e-5)
-    at_opt = float(step_sigmas(gn[0], prob))
+    step = jax.jit(step_sigmas)
+    at_opt = float(step(gn[0], prob))
     assert at_opt < STATIONARY_SIGMAS / 10
     off = (gn[0][0] + jnp.asarray([0.05, 0.05, 0.0, 0.0]), gn[0][1])  # focal lengths 5 % off
-    assert float(step_sigmas(off, prob)) > 1.0
+    assert float(step(off, prob)) > 1.0
 
 
 def test_padded_chart_equals_the_compact_chart_for_a_known_aspect(scene):
@@ -108,9 +109,10 @@ def test_padded_chart_equals_the_compact_chart_for_a_known_aspect(scene):
     prob = BundleProblem(prob.fields, prob.samples, prob.weights, jnp.asarray(1.0))
     k4 = k4 + jnp.asarray([0.0, 0.02, 1.0, -1.0])  # start a little off the truth
     k3 = k4[1:]
-    r3 = residuals((k3, a0), prob)
+    res = jax.jit(residuals)
+    r3 = res((k3, a0), prob)
     for junk in (0.0, 3.0, -7.0):
-        np.testing.assert_array_equal(np.asarray(residuals((k4.at[0].set(junk), a0), prob)), np.asarray(r3))
+        np.testing.assert_array_equal(np.asarray(res((k4.at[0].set(junk), a0), prob)), np.asarray(r3))
     assert float(n_params((k4, a0), prob)) == float(n_params((k3, a0), prob)) == 3 + 2 * 3
     s4, s3 = solve((k4, a0), prob, method="gn"), solve((k3, a0), prob, method="gn")
     np.testing.assert_allclose(np.asarray(s4[0][0][1:]), np.asarray(s3[0][0]), rtol=1e-9, atol=1e-9)
@@ -213,6 +215,8 @@ def test_orthographic_cost_vanishes_only_without_perspective(scene):
     do not (their truth fits exactly, the orthographic camera about 0.75 px RMS worse)."""
     from sorjax._bundle import make_problem, orthographic_cost
 
+    ortho, res = jax.jit(orthographic_cost), jax.jit(residuals)
+
     outs = [_mirror_symmetric_outline(a, c) for a, c in ((10.0, (-1.5, 0.4)), (-35.0, (1.2, -0.3)))]
     pts = np.stack([np.asarray(sorjax.make_outline(100 * o, 1024).points) for o in outs]) * 0.01
     prob = make_problem(pts, 100, aspect=1.0)
@@ -221,8 +225,8 @@ def test_orthographic_cost_vanishes_only_without_perspective(scene):
     l0[:, 2] = -(l0[:, :2] * np.array([[-1.5, 0.4], [1.2, -0.3]])).sum(1)
     y0 = (intrinsic_params(np.array([[5.0, 0, 0.1], [0, 5.0, -0.2], [0, 0, 1]]), False), axis_params(l0))
     n = float(jnp.sum(prob.weights))
-    assert float(orthographic_cost(y0, prob)) / n < 1e-3**2 * 1e-4  # (1e-5 units = 1e-3 px)^2
-    assert float(jnp.sum(residuals(y0, prob) ** 2)) / n > 1e-4  # the start is off
+    assert float(ortho(y0, prob)) / n < 1e-3**2 * 1e-4  # (1e-5 units = 1e-3 px)^2
+    assert float(jnp.sum(res(y0, prob) ** 2)) / n > 1e-4  # the start is off
 
     # perspective: the two spheres at f = 700, in units of 100 px
     T = np.diag([0.01, 0.01, 1.0])
@@ -230,8 +234,8 @@ def test_orthographic_cost_vanishes_only_without_perspective(scene):
     prob = make_problem(pts, 100, aspect=None)
     y = (intrinsic_params(T @ scene.K, True), axis_params(np.stack([np.linalg.solve(T.T, v.l_s) for v in scene.views])))
     n = float(jnp.sum(prob.weights))
-    at_truth = float(jnp.sum(residuals(y, prob) ** 2)) / n
-    g_px = 100 * np.sqrt(float(orthographic_cost(y, prob)) / n - at_truth)
+    at_truth = float(jnp.sum(res(y, prob) ** 2)) / n
+    g_px = 100 * np.sqrt(float(ortho(y, prob)) / n - at_truth)
     assert at_truth < (1e-3 / 100) ** 2 and 0.4 < g_px < 1.5, (at_truth, g_px)
 
 

@@ -70,7 +70,7 @@ def _errors(K, h, view):
 def test_fixed_number_of_starts(batch):
     rows, views, _, _ = batch
     i = rows["sor 1.0"][0]
-    vs, ls, valid = automatic_starts(views.points[i], views.samples[i])
+    vs, ls, valid = jax.jit(automatic_starts)(views.points[i], views.samples[i])
     assert vs.shape == ls.shape == (N_STARTS, 3) and valid.shape == (N_STARTS,)
     assert bool(valid.any())
 
@@ -99,8 +99,8 @@ def test_noisy_views_are_local_minima_near_truth(batch):
         assert 0.05 < float(h.rms) < 1.0
         p, v0, E = _pack(f.v, f.l)
         args = (_get(views.fields, i), views.samples[i], views.weights[i] * f.inliers, v0, E)
-        r = _residuals(p, args)
-        J = jax.jacfwd(_residuals)(p, args)
+        r = jax.jit(_residuals)(p, args)
+        J = jax.jit(jax.jacfwd(_residuals))(p, args)
         np.testing.assert_allclose(float(jnp.sum(r**2)), float(f.cost), rtol=1e-12)
         g = J.T @ r  # half the gradient of the cost
         assert float(jnp.linalg.norm(g)) < 1e-7 * float(jnp.linalg.norm(J)) * float(jnp.linalg.norm(r)), name

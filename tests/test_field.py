@@ -62,14 +62,15 @@ def test_hinted_search_matches_the_whole_outline_search_near_its_hint():
     t = rng.uniform(0, 2 * np.pi, 500)
     r = rng.uniform(-5, 5, 500)
     q = jnp.asarray(np.stack([CX + (A + r) * np.cos(t), CY + (B + r) * np.sin(t)], 1))
-    t_true = jax.vmap(closest_parameter, in_axes=(None, 0))(field, q)
-    whole = np.asarray(signed_distances(field, q))
+    t_true = jax.jit(jax.vmap(closest_parameter, in_axes=(None, 0)))(field, q)
+    distances = jax.jit(signed_distances)
+    whole = np.asarray(distances(field, q))
     near = jnp.mod(t_true + rng.uniform(-(reach - 1), reach - 1, 500), m)
     np.testing.assert_allclose(np.asarray(jax.jit(signed_distances)(field, q, near)), whole, rtol=0, atol=1e-12)
-    g = jax.vmap(jax.grad(signed_distance, argnums=1), in_axes=(None, 0, 0))(field, q, near)
-    g0 = jax.vmap(jax.grad(signed_distance, argnums=1), in_axes=(None, 0))(field, q)
+    g = jax.jit(jax.vmap(jax.grad(signed_distance, argnums=1), in_axes=(None, 0, 0)))(field, q, near)
+    g0 = jax.jit(jax.vmap(jax.grad(signed_distance, argnums=1), in_axes=(None, 0)))(field, q)
     np.testing.assert_allclose(np.asarray(g), np.asarray(g0), atol=1e-10)
-    far = np.asarray(signed_distances(field, q, jnp.mod(t_true + m / 2, m)))
+    far = np.asarray(distances(field, q, jnp.mod(t_true + m / 2, m)))
     assert np.min(np.abs(far - whole)) > 1e-3  # a stale hint shows (the solvers test at 1e-9)
 
 
@@ -87,7 +88,7 @@ def test_checked_distances_are_the_whole_and_the_near_search_in_one_pass():
     t = rng.uniform(0, 2 * np.pi, 200)
     r = rng.uniform(-5, 5, 200)
     q = jnp.asarray(np.stack([CX + (A + r) * np.cos(t), CY + (B + r) * np.sin(t)], 1))
-    t_true = jax.vmap(closest_parameter, in_axes=(None, 0))(field, q)
+    t_true = jax.jit(jax.vmap(closest_parameter, in_axes=(None, 0)))(field, q)
     hints = jnp.mod(t_true + jnp.where(jnp.arange(200) % 7 == 0, m / 2, 3.0), m)  # every 7th stale
     d, feet, d_near = jax.jit(checked_distances)(field, q, hints)
     np.testing.assert_allclose(np.asarray(d), np.asarray(jax.jit(signed_distances)(field, q)), rtol=0, atol=1e-12)
@@ -95,10 +96,10 @@ def test_checked_distances_are_the_whole_and_the_near_search_in_one_pass():
     np.testing.assert_allclose(np.asarray(d_near), np.asarray(jax.jit(signed_distances)(field, q, hints)), rtol=0,
                                atol=1e-12)
     assert np.sum(np.abs(np.asarray(d_near) - np.asarray(d)) > 1e-9) == np.sum(np.arange(200) % 7 == 0)
-    d2, _, same = checked_distances(field, q)
+    d2, _, same = jax.jit(checked_distances)(field, q)
     np.testing.assert_array_equal(np.asarray(d2), np.asarray(same))
-    g = jax.grad(lambda x: jnp.sum(checked_distances(field, x, hints)[0] ** 2))(q)
-    g0 = jax.grad(lambda x: jnp.sum(signed_distances(field, x) ** 2))(q)
+    g = jax.jit(jax.grad(lambda x: jnp.sum(checked_distances(field, x, hints)[0] ** 2)))(q)
+    g0 = jax.jit(jax.grad(lambda x: jnp.sum(signed_distances(field, x) ** 2)))(q)
     np.testing.assert_allclose(np.asarray(g), np.asarray(g0), rtol=0, atol=1e-12)
 
 
@@ -142,8 +143,9 @@ def test_whole_outline_search_finds_the_closest_point_near_sharp_corners():
     def brute(x):
         return _newton_foot(field, x, _argmin(jnp.sum((field.knots - x) ** 2, -1)).astype(jnp.float64))
 
-    exact = signed_distances(field, q, jax.vmap(brute)(q))
-    found = signed_distances(field, q, jax.vmap(closest_parameter, in_axes=(None, 0))(field, q))
+    distances = jax.jit(signed_distances)
+    exact = distances(field, q, jax.jit(jax.vmap(brute))(q))
+    found = distances(field, q, jax.jit(jax.vmap(closest_parameter, in_axes=(None, 0)))(field, q))
     assert float(jnp.max(jnp.abs(found - exact))) < 1e-6
 
 
@@ -151,19 +153,21 @@ def test_gradient_matches_central_differences():
     field = ellipse_field()
     rng = np.random.default_rng(1)
     q = jnp.asarray(np.stack([CX + A * 1.02 * np.cos(np.r_[0.3, 2.0, 4.0]), CY + B * 0.97 * np.sin(np.r_[0.3, 2.0, 4.0])], 1))
-    g = jax.vmap(jax.grad(signed_distance, argnums=1), in_axes=(None, 0))(field, q)
+    g = jax.jit(jax.vmap(jax.grad(signed_distance, argnums=1), in_axes=(None, 0)))(field, q)
     h = 1e-5
+    distances = jax.jit(signed_distances)
     for k in range(2):
         e = jnp.zeros(2).at[k].set(h)
-        fd = (signed_distances(field, q + e) - signed_distances(field, q - e)) / (2 * h)
+        fd = (distances(field, q + e) - distances(field, q - e)) / (2 * h)
         np.testing.assert_allclose(np.asarray(g[:, k]), np.asarray(fd), rtol=1e-6, atol=1e-9)
     # gradient with respect to the outline points too (the field is built by FFT)
     pts = make_outline(np.asarray(field.knots), 512).points
 
+    @jax.jit
     def f(p):
         return jnp.sum(signed_distances(make_field(p), q) ** 2)
 
-    gp = jax.grad(f)(pts)
+    gp = jax.jit(jax.grad(f))(pts)
     d = jnp.asarray(rng.normal(size=pts.shape))
     fd = (f(pts + 1e-6 * d) - f(pts - 1e-6 * d)) / 2e-6
     np.testing.assert_allclose(float(jnp.sum(gp * d)), float(fd), rtol=1e-5)
@@ -179,7 +183,7 @@ def test_field_is_c1_across_knots():
     off = np.array([tangent[1], -tangent[0]]) * 3.0  # 3 px outside
     s = np.linspace(-0.5, 0.5, 201)
     pts = jnp.asarray(knot + off + s[:, None] * tangent[None, :] * 0.5)
-    g = np.asarray(jax.vmap(jax.grad(signed_distance, argnums=1), in_axes=(None, 0))(field, pts))
+    g = np.asarray(jax.jit(jax.vmap(jax.grad(signed_distance, argnums=1), in_axes=(None, 0)))(field, pts))
     assert np.max(np.linalg.norm(np.diff(g, axis=0), axis=1)) < 1e-3
 
 

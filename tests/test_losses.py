@@ -162,7 +162,7 @@ def test_grad_bundle_residuals(scene):
     np.testing.assert_allclose(gv, _central(lambda w: cost(k0, w), v), rtol=1e-5,
                                atol=1e-8 * float(jnp.abs(gv).max()))
     # jacobian of the residual vector itself, one column
-    J = jax.jacfwd(lambda k: losses.bundle_residuals(k, v, samples, fields))(k0)
+    J = jax.jit(jax.jacfwd(lambda k: losses.bundle_residuals(k, v, samples, fields)))(k0)
     h = 1e-3
     d = jnp.zeros(4).at[2].set(h)
     r = jax.jit(lambda k: losses.bundle_residuals(k, v, samples, fields))
