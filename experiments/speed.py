@@ -53,10 +53,21 @@ time, where a cut of the compilation pays (the parts overlap).
 
 A table of every measure with its target and a pass/miss mark closes the output.
 
+With ``--calibrate-program`` only the program of one ``sorjax.calibrate`` call is
+measured (then the script exits): ``random_sor_scene(SEED, VIEWS)`` (``--program-seed``,
+``--program-views``; default 0 and 4), the bundle's compiled core
+(``sorjax._calibration._core``, the arguments ``calibrate`` passes it) traced and lowered,
+its size as StableHLO operations with every called function inlined, its XLA compile
+time (at the optimisation level ``XLA_FLAGS`` sets, the default if none), a user's first
+``calibrate`` with a fresh cache (wall, the per-view fits' program included) and the
+warm run time (median of 8 calls).
+
     python experiments/speed.py                       # full Table 1 (1400 trials)
     python experiments/speed.py --trials 2            # 2 trials per cell (28), a smoke run
     python experiments/speed.py --trials 10 --devices 2
     python experiments/speed.py --trials 1 --skip-quick --components
+    python experiments/speed.py --calibrate-program
+    XLA_FLAGS=--xla_backend_optimization_level=0 python experiments/speed.py --calibrate-program  # the tests' level
 """
 
 from __future__ import annotations
@@ -591,6 +602,90 @@ def components(points: np.ndarray, opts, methods: tuple[str, ...]) -> list[tuple
     return rows
 
 
+def stablehlo_ops(text: str) -> int:
+    """Operations of a lowered program's StableHLO text (``Lowered.as_text()``) with every
+    called function inlined: the ``stablehlo.*`` results of ``main`` plus, for each
+    ``call``, those of the function called (recursively), as XLA sees them after
+    inlining."""
+    import collections
+    import re
+
+    own, calls, cur = collections.Counter(), collections.defaultdict(list), None
+    for line in text.splitlines():
+        m = re.match(r"\s*func\.func (?:public |private )?@([\w.$-]+)", line)
+        if m:
+            cur = m.group(1)
+            continue
+        if cur is None:
+            continue
+        m = re.search(r"(?:func\.)?call @([\w.$-]+)", line)
+        if m:
+            calls[cur].append(m.group(1))
+        if re.search(r"= stablehlo\.\w+", line):
+            own[cur] += 1
+    memo: dict[str, int] = {}
+
+    def size(f):
+        if f not in memo:
+            memo[f] = own[f] + sum(size(c) for c in calls[f])
+        return memo[f]
+
+    return size("main")
+
+
+class _Captured(Exception):
+    pass
+
+
+def calibrate_program(seed: int = 0, views: int = 4, runs: int = 8) -> dict:
+    """The compiled program of one ``sorjax.calibrate`` call on ``random_sor_scene(seed,
+    views)``'s exact outlines: the bundle core's (:func:`sorjax._calibration._core`)
+    operations (inlined StableHLO), trace + lower and XLA compile times (s); then a
+    first ``calibrate`` from a fresh compilation cache (wall s: the per-view fits' program
+    compiled, the core's read back from the cache just written) and the warm time of one
+    call (median of ``runs``).  Call with a fresh ``SORJAX_CACHE``."""
+    import jax
+
+    import sorjax
+    from sorjax import _calibration as C
+    from sorjax import scenes
+
+    sc = scenes.random_sor_scene(seed, views)
+    outlines = [v.outline for v in sc.views]
+    core, got = C._core, {}
+
+    def capture(*args, **kwargs):  # the arguments calibrate passes, nothing run
+        got["args"], got["kwargs"] = args, kwargs
+        raise _Captured
+
+    C._core = capture
+    try:
+        sorjax.calibrate(outlines, image_size=sc.image_size)
+    except _Captured:
+        pass
+    finally:
+        C._core = core
+    t0 = time.perf_counter()
+    lowered = core.lower(*got["args"], **got["kwargs"])
+    t1 = time.perf_counter()
+    ops = stablehlo_ops(lowered.as_text())
+    t2 = time.perf_counter()
+    lowered.compile()
+    t3 = time.perf_counter()
+    jax.clear_caches()  # the first call traces again, as a new process would
+    t4 = time.perf_counter()
+    cal = sorjax.calibrate(outlines, image_size=sc.image_size)
+    first = time.perf_counter() - t4
+    warm = []
+    for _ in range(runs):
+        t = time.perf_counter()
+        cal = sorjax.calibrate(outlines, image_size=sc.image_size)
+        warm.append(time.perf_counter() - t)
+    f_err = abs(cal.fv / sc.K[1, 1] - 1) * 100
+    return dict(views=views, seed=seed, ops=ops, lower_s=t1 - t0, compile_s=t3 - t2, first_s=first,
+                warm_s=statistics.median(warm), f_err_pct=f_err, flags=os.environ.get("XLA_FLAGS", ""))
+
+
 def _mark(ok):
     return "-" if ok is None else ("pass" if ok else "MISS")
 
@@ -613,11 +708,32 @@ def main(argv=None):
                         "of each (a few minutes)")
     p.add_argument("--timeout", type=float, default=1800.0, help="limit of each subprocess, s")
     p.add_argument("--table-json", action="store_true", help=argparse.SUPPRESS)  # the --devices subprocess
+    p.add_argument("--calibrate-program", action="store_true",
+                   help="only measure one sorjax.calibrate call's compiled program (size, trace, compile, first and "
+                        "warm run), then exit")
+    p.add_argument("--program-views", type=int, default=4, help="views of --calibrate-program's scene")
+    p.add_argument("--program-seed", type=int, default=0, help="random_sor_scene seed of --calibrate-program's scene")
     a = p.parse_args(argv)
     devices = a.devices if a.workers is None else a.workers
 
     if not a.warm_cache:
         os.environ["SORJAX_CACHE"] = _fresh_cache()  # before the runner enables the cache
+    if a.calibrate_program:
+        import jax
+
+        jax.config.update("jax_enable_x64", True)
+        from sorjax.experiment._runner import enable_compilation_cache
+
+        enable_compilation_cache()
+        print(f"calibrate's program: random_sor_scene({a.program_seed}, {a.program_views}), exact outlines, "
+              f"{'warm' if a.warm_cache else 'fresh'} compilation cache, XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}",
+              flush=True)
+        r = calibrate_program(a.program_seed, a.program_views)
+        print(f"    bundle core (_core): {r['ops']:,} StableHLO operations (called functions inlined); trace + lower "
+              f"{r['lower_s']:.1f} s, XLA compile {r['compile_s']:.1f} s")
+        print(f"    first calibrate (per-view fits compiled, the core from the cache): {r['first_s']:.1f} s; warm "
+              f"{_ms(r['warm_s'])} a call (median of 8); focal error {r['f_err_pct']:.2g} %")
+        return
     if a.table_json:
         nums, _, _ = measure_table(a.trials, a.chunk)
         print(JSON_TAG + json.dumps(nums), flush=True)

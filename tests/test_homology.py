@@ -70,9 +70,9 @@ def test_noisy_fit_stays_close(spheres):
 def test_residuals_jit_vmap_and_gradient(spheres):
     """The eq.-20 residuals: jit == eager, vmap over views == loop, grad == FD."""
     pts = jnp.stack([sorjax.make_outline(v.outline, 256).points for v in spheres.views])
-    fields = jax.vmap(distance_field)(pts)
-    samples = jax.vmap(lambda f: outline_samples(f, 50))(fields)
-    weights = jax.vmap(lambda f: sample_weights(f, 50))(fields)
+    fields = jax.jit(jax.vmap(distance_field))(pts)
+    samples = jax.jit(jax.vmap(lambda f: outline_samples(f, 50)))(fields)
+    weights = jax.jit(jax.vmap(lambda f: sample_weights(f, 50)))(fields)
     vs = jnp.stack([jnp.asarray(v.v_x) for v in spheres.views])
     ls = jnp.stack([jnp.asarray(v.l_s) for v in spheres.views])
     batched = jax.jit(jax.vmap(symmetry_residuals))(vs, ls, samples, fields, weights)
@@ -84,10 +84,11 @@ def test_residuals_jit_vmap_and_gradient(spheres):
     f0 = jax.tree_util.tree_map(lambda a: a[0], fields)
     l_off = ls[0] + jnp.array([0.0, 0.0, 2.0])  # move the axis 2 px: residuals grow
 
+    @jax.jit
     def cost(v):
         return jnp.sum(symmetry_residuals(v, l_off, samples[0], f0) ** 2)
 
-    g = jax.grad(cost)(vs[0])
+    g = jax.jit(jax.grad(cost))(vs[0])
     d = jnp.asarray([0.3, -0.2, 0.1]) * jnp.abs(vs[0]).max()
     h = 1e-7
     fd = (cost(vs[0] + h * d) - cost(vs[0] - h * d)) / (2 * h)

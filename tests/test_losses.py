@@ -33,8 +33,8 @@ def scene():
     sc = scenes.two_spheres(f=700.0)
     outs = [scenes.paper_noise(o, 0.5, 7 + i) for i, o in enumerate(sc.outlines)]
     P = jnp.stack([sorjax.make_outline(o, N_POINTS).points for o in outs])
-    fields = jax.vmap(losses.distance_field)(P)
-    samples = jax.vmap(lambda f: losses.outline_samples(f, N_SAMPLES))(fields)
+    fields = jax.jit(jax.vmap(losses.distance_field))(P)
+    samples = jax.jit(jax.vmap(lambda f: losses.outline_samples(f, N_SAMPLES)))(fields)
     v = jnp.stack([jnp.asarray(view.v_x, jnp.float64) for view in sc.views])
     l = jnp.stack([jnp.asarray(view.l_s, jnp.float64) for view in sc.views])
     return sc, outs, P, fields, samples, v, l
@@ -65,7 +65,7 @@ def test_jit_vmap_fields(scene):
     for fn, args in cases:
         eager = [fn(*jax.tree.map(lambda a: a[j], args)) for j in range(P.shape[0])]
         _close(jax.jit(fn)(*jax.tree.map(lambda a: a[0], args)), eager[0])
-        _close(jax.vmap(fn)(*args), _stack(eager))
+        _close(jax.jit(jax.vmap(fn))(*args), _stack(eager))
 
 
 def test_jit_vmap_homology(scene):
@@ -81,7 +81,7 @@ def test_jit_vmap_homology(scene):
     for fn, args in cases:
         eager = [fn(*jax.tree.map(lambda a: a[j], args)) for j in range(P.shape[0])]
         _close(jax.jit(fn)(*jax.tree.map(lambda a: a[0], args)), eager[0])
-        _close(jax.vmap(fn)(*args), _stack(eager))
+        _close(jax.jit(jax.vmap(fn))(*args), _stack(eager))
 
 
 def test_jit_vmap_bundle_residuals(scene):
@@ -91,7 +91,8 @@ def test_jit_vmap_bundle_residuals(scene):
     eager = [losses.bundle_residuals(t, v, samples, fields) for t in trials]
     assert eager[0].shape == samples.shape[:2]
     _close(jax.jit(losses.bundle_residuals)(trials[0], v, samples, fields), eager[0])
-    _close(jax.vmap(losses.bundle_residuals, in_axes=(0, None, None, None))(trials, v, samples, fields), _stack(eager))
+    _close(jax.jit(jax.vmap(losses.bundle_residuals, in_axes=(0, None, None, None)))(trials, v, samples, fields),
+           _stack(eager))
 
 
 def test_jit_calibrated_intrinsics(scene, calibration):
