@@ -612,13 +612,13 @@ def stablehlo_ops(text: str) -> int:
 
     own, calls, cur = collections.Counter(), collections.defaultdict(list), None
     for line in text.splitlines():
-        m = re.match(r"\s*func\.func (?:public |private )?@([\w.$-]+)", line)
+        m = re.match(r"\s*func\.func (?:public |private )?@(\"[^\"]+\"|[\w.$-]+)", line)
         if m:
             cur = m.group(1)
             continue
         if cur is None:
             continue
-        m = re.search(r"(?:func\.)?call @([\w.$-]+)", line)
+        m = re.search(r"(?:func\.)?call @(\"[^\"]+\"|[\w.$-]+)", line)  # names with <> are quoted
         if m:
             calls[cur].append(m.group(1))
         if re.search(r"= stablehlo\.\w+", line):

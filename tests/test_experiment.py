@@ -181,3 +181,23 @@ def test_cli_experiment_bad_input(tmp_path, capsys):
     assert main(["experiment", str(bad)]) == 2
     err = capsys.readouterr().err
     assert "noise.sigma" in err and "Traceback" not in err
+
+
+def test_speed_counts_stablehlo_operations_with_calls_inlined():
+    """experiments/speed.py's size of a compiled program (--calibrate-program; the
+    operation counts in docs/results.md): a jitted function called twice counts twice,
+    as in the same program with the function inlined by Python."""
+    import importlib.util
+
+    import jax
+    import jax.numpy as jnp
+
+    path = Path(__file__).resolve().parents[1] / "experiments" / "speed.py"
+    spec = importlib.util.spec_from_file_location("sorjax_speed_benchmark", path)
+    speed = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(speed)
+    inner = jax.jit(lambda x: jnp.sin(x) * 2.0)  # lowered as one private function, called twice
+    called = jax.jit(lambda x: inner(x) + inner(x + 1.0)).lower(1.0).as_text()
+    assert called.count("call @") == 2
+    inlined = jax.jit(lambda x: jnp.sin(x) * 2.0 + jnp.sin(x + 1.0) * 2.0).lower(1.0).as_text()
+    assert speed.stablehlo_ops(called) == speed.stablehlo_ops(inlined) == 9  # sin, 2, *; twice; 1, +, +
