@@ -69,8 +69,8 @@ from ._distortion import distort, undistort
 from ._field import DistanceField, checked_distances, closest_parameter, setup, signed_distances
 from ._homology import homology_matrix, symmetry_checked, symmetry_feet, symmetry_residuals, transfer
 from ._linear import focal_from_principal_point, linear_estimates
-from ._noise import (NoiseGeometry, estimate_noise, knot_spacing_px, noise_geometry, noise_meat, sample_normals,
-                     smoothed_outline, unit_blocks)
+from ._noise import (NoiseGeometry, estimate_noise, jacobian_and_normal_sensitivity, knot_spacing_px, noise_geometry,
+                     noise_meat, sample_normals, smoothed_outline, unit_blocks)
 from ._solvers import NULL_RCOND, Solved, computed_as, is_stale, polish_traced, solvers, until_fresh_traced
 from .core._options import Options
 
@@ -474,23 +474,14 @@ def residual_jacobian(y, problem: BundleProblem, feet=None, normals: bool = Fals
     flat, unravel = jax.flatten_util.ravel_pytree(y)
     if feet is None:
         feet = foot_parameters(y, problem)  # searched once; exact hints for J, r and the mirror pairs
-    if not normals:
-        def res(f):
-            r = residuals(unravel(f), problem, feet)
-            return r, r
+    def res(f, samples):
+        return residuals(unravel(f), eqx.tree_at(lambda q: q.samples, problem, samples), feet)
 
-        J, r = jax.jacfwd(res, has_aux=True)(flat)  # the residuals from the same pass
-        return J, r, feet
-    nu = problem_normals(problem)
-
-    def res_moved(f, s):  # the samples moved by s along their normals
-        moved = BundleProblem(problem.fields, problem.samples + s * nu, problem.weights, problem.aspect,
-                              problem.n_dist, problem.fixed)
-        r = residuals(unravel(f), moved, feet)
-        return r, r
-
-    (J, a), r = jax.jacfwd(res_moved, argnums=(0, 1), has_aux=True)(flat, jnp.zeros((), flat.dtype))
-    return J, r, feet, a.reshape(problem.weights.shape)
+    if normals:
+        J, r, a = jacobian_and_normal_sensitivity(res, flat, problem.samples, problem_normals(problem))
+        return J, r, feet, a.reshape(problem.weights.shape)
+    J, r = jax.jacfwd(lambda f: (res(f, problem.samples),) * 2, has_aux=True)(flat)  # r from the same pass
+    return J, r, feet
 
 
 def problem_normals(problem: BundleProblem) -> Float[Array, "V N 2"]:

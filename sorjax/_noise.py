@@ -212,6 +212,22 @@ def sample_normals(field: DistanceField, n: int) -> Float[Array, "n 2"]:
     return jnp.where(area < 0, -1.0, 1.0) * nrm / jnp.linalg.norm(nrm, axis=-1, keepdims=True)
 
 
+def jacobian_and_normal_sensitivity(fn, p, samples: Float[Array, "... 2"], normals: Float[Array, "... 2"]):
+    """``(J, r, a)`` of the residuals ``r = fn(p, samples)`` in one forward-mode pass:
+    ``J = dr/dp`` (``r``'s shape, then ``p``'s), ``r`` itself, and ``a = d/dt r(p,
+    samples + t normals)`` at ``t = 0`` (``r``'s shape): each residual's sensitivity to
+    the samples moving along ``normals`` (unit outward normals, :func:`sample_normals`),
+    the ``a_i`` of this module's noise model.  Units: ``a`` is ``r``'s units per unit of
+    the samples' coordinates."""
+
+    def moved(p, t):
+        r = fn(p, samples + t * normals)
+        return r, r
+
+    (J, a), r = jax.jacfwd(moved, argnums=(0, 1), has_aux=True)(p, jnp.zeros((), samples.dtype))
+    return J, r, a
+
+
 def smoothed_outline(field: DistanceField, n: int, smooth_px, scale):
     """``(field, samples)`` of the outline smoothed along the curve by a Gaussian of
     ``smooth_px`` px (``scale`` px per unit): where a covariance reads its Jacobian,

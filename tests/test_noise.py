@@ -98,3 +98,22 @@ def test_estimate_noise_under_vmap_equals_single_calls():
         ell, level = nz.estimate_noise(g, rk, Jk, 0.25, 32.0)
         assert float(ell_v[k]) == float(ell)
         assert float(level_v[k]) == pytest.approx(float(level), rel=1e-12)
+
+
+def test_jacobian_and_normal_sensitivity_in_one_pass():
+    """``(J, r, a)`` of ``r = fn(p, samples)`` equal the residuals, their Jacobian in
+    ``p`` and their derivative along the samples' normals taken one at a time (jacfwd,
+    jvp); also under jit and vmap over views."""
+    rng = np.random.default_rng(11)
+    samples = jnp.asarray(rng.normal(size=(4, 7, 2)))
+    normals = jnp.asarray(rng.normal(size=(4, 7, 2)))
+    p = jnp.asarray(rng.normal(size=3))
+
+    def fn(p, s):
+        return jnp.sin(s @ p[:2]) * p[2] + jnp.sum(s**2, -1) * p[0]
+
+    J, r, a = jax.jit(jax.vmap(lambda s, n: nz.jacobian_and_normal_sensitivity(fn, p, s, n)))(samples, normals)
+    for v in range(4):
+        np.testing.assert_allclose(r[v], fn(p, samples[v]), rtol=1e-13)
+        np.testing.assert_allclose(J[v], jax.jacfwd(fn)(p, samples[v]), rtol=1e-13)
+        np.testing.assert_allclose(a[v], jax.jvp(lambda s: fn(p, s), (samples[v],), (normals[v],))[1], rtol=1e-13)

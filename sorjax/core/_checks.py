@@ -62,7 +62,7 @@ from .._bundle import (BundleProblem, fixed_chart, foot_parameters, free_intrins
                        pin_intrinsics, pixel_params, pole_polar_pairs, problem_normals, project_out,
                        residual_jacobian, residual_variance, with_model)
 from .._homology import symmetry_residuals
-from .._noise import noise_meat
+from .._noise import jacobian_and_normal_sensitivity, noise_meat
 from ._options import Options
 
 # ModelChecks.verdict
@@ -189,19 +189,19 @@ def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=N
         b1 = b1 / jnp.linalg.norm(b1)
         return b1, jnp.cross(v, b1)
 
-    def res(p, v, l, s, f, w, h, nu):  # p: the release (4,), then the samples' move along their normals
-        th, rho = jnp.arctan2(l[1], l[0]) + p[0], -l[2] / jnp.linalg.norm(l[:2]) + p[1]
-        b1, b2 = basis(v)
-        lp = jnp.stack([jnp.cos(th), jnp.sin(th), -rho])
-        r = symmetry_residuals(v + p[2] * b1 + p[3] * b2, lp, s + p[4] * nu, f, w, h)
-        return r, r
+    def one(v, l, s, f, w, h, nu):  # one view's release p (4,) at zero
+        def res(p, s):
+            th, rho = jnp.arctan2(l[1], l[0]) + p[0], -l[2] / jnp.linalg.norm(l[:2]) + p[1]
+            b1, b2 = basis(v)
+            lp = jnp.stack([jnp.cos(th), jnp.sin(th), -rho])
+            return symmetry_residuals(v + p[2] * b1 + p[3] * b2, lp, s, f, w, h)
 
-    # one forward-mode pass per view: the residuals (V, N), the releases' Jacobian (V,
-    # N, 4) and the residuals' sensitivity to their samples moving along the normals
-    # (the noise model's geometry, :func:`sorjax._bundle.noise_geometry_at`)
-    J, r = jax.vmap(lambda *a: jax.jacfwd(res, has_aux=True)(jnp.zeros(5), *a))(
-        v, l, problem.samples, problem.fields, problem.weights, feet, problem_normals(problem))
-    J, a_nu = J[..., :4], J[..., 4]
+        return jacobian_and_normal_sensitivity(res, jnp.zeros(4), s, nu)
+
+    # one forward-mode pass per view: the releases' Jacobian (V, N, 4), the residuals
+    # (V, N) and their sensitivity to their samples moving along the normals (the noise
+    # model's geometry, :func:`sorjax._bundle.noise_geometry_at`)
+    J, r, a_nu = jax.vmap(one)(v, l, problem.samples, problem.fields, problem.weights, feet, problem_normals(problem))
     n = jnp.sum(problem.weights, axis=1)
     n_par = jnp.sum(used) * 2 + n_free_intrinsics(aspect, fixed)
     s2 = jnp.sum(r**2) / jnp.maximum(jnp.sum(n) - n_par, 1.0)

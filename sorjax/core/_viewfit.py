@@ -55,7 +55,8 @@ from jaxtyping import Array, Bool, Float, Int
 
 from .._field import DistanceField
 from .._homology import homology_matrix, symmetry_checked, symmetry_feet, symmetry_residuals, transfer
-from .._noise import (estimate_noise, knot_spacing_px, noise_geometry, noise_meat, sample_normals, smoothed_outline,
+from .._noise import (estimate_noise, jacobian_and_normal_sensitivity, knot_spacing_px, noise_geometry, noise_meat,
+                      sample_normals, smoothed_outline,
                       unit_blocks)
 from .._solvers import Solved, is_stale, polish_traced, solvers, until_fresh_traced
 from ._options import Options
@@ -458,15 +459,9 @@ def _infinity_z(field, samples, weights, v, l, feet, scale, options: Options):
     p, v, E = _pack(v, l)
     n = samples.shape[0]
     res = lambda p, f, s: _residuals(p, (f, s, weights, v, E, feet))[:-1]  # noqa: E731  (no barrier)
-    nu = sample_normals(field, n)
-
-    def moved(p, t):  # the samples moved by t along their normals
-        r = res(p, field, samples + t * nu)
-        return r, r
-
     # one forward-mode pass: the Jacobian, the residuals and their sensitivity to the
     # samples moving along the normals
-    (J, a), r = jax.jacfwd(moved, argnums=(0, 1), has_aux=True)(p, jnp.zeros((), samples.dtype))
+    J, r, a = jacobian_and_normal_sensitivity(lambda p, s: res(p, field, s), p, samples, sample_normals(field, n))
     sm, sm_samples = smoothed_outline(field, n, options.covariance_smooth_px, scale)
     Js = jax.jacfwd(res)(p, sm, sm_samples)
     geo = noise_geometry(a[None], weights[None], feet[None], knot_spacing_px(field, scale)[None], field.n_knots)
