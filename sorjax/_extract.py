@@ -1164,7 +1164,8 @@ def _refined(src: _Image, k, b, w, fg, *, inner, min_area, smooth, border, o):
     return p, stats, outline_homology(p)
 
 
-def _finish_all(src: _Image, segs, *, refine, min_area, smooth, border, iterations: int) -> list[np.ndarray]:
+def _finish_all(src: _Image, segs, *, refine, min_area, smooth, border, iterations: int,
+                symmetric: bool = True) -> list[np.ndarray]:
     """Outlines of the segmented objects ``(index, box, window, fg, symmetry_rms)`` of one
     image, with one unmixing band for all, each moved onto the image's edges when
     ``refine`` (:func:`sorjax._detect.refine_to_edges`), as :class:`ImageOutline` arrays.
@@ -1211,9 +1212,34 @@ def _finish_all(src: _Image, segs, *, refine, min_area, smooth, border, iteratio
                 if again is not None:
                     q_quality = outline_quality(*again)
                     if q_quality["outline_error"] <= o.recut_gain * quality["outline_error"]:
-                        p, quality = again[0], q_quality
+                        p, quality, hom = again[0], q_quality, again[2]
+        if symmetric:
+            p = _averaged(src, p, hom, o)
         out.append(ImageOutline(p, **quality))
     return out
+
+
+def _averaged(src: _Image, p: np.ndarray, hom, o) -> np.ndarray:
+    """The refined outline ``p`` averaged with its mirror image
+    (:func:`sorjax._detect.symmetric_average`, weighted by where
+    :func:`sorjax._detect.refine_to_edges` confirms the image's edge), or ``p`` as it is
+    when it has no homology, is not symmetric within the judge's limit
+    (:func:`sorjax._detect.symmetry_limit`: not a surface of revolution's outline, whose
+    mirror image would move it) or touches the image border (its mirror image would
+    reach past it), and when the average crosses itself (where the mirror partners of
+    neighbouring points lie on different parts of a thin or leaking outline;
+    ``random_photo_set(126)`` had one).  Its error attributes stay those of ``p``."""
+    from ._detect import refine_to_edges, symmetric_average, symmetry_limit
+    from ._outline import _segments_cross
+
+    H, W = src.shape
+    if hom is None or not float(hom.rms) <= symmetry_limit(p, o):
+        return p
+    if (p.min(0) < 1.0).any() or p[:, 0].max() > W - 2.0 or p[:, 1].max() > H - 2.0:
+        return p
+    _, stats = refine_to_edges((src.f64, src.shape), p, o, keep=True)
+    q = symmetric_average(p, hom.W, stats["kept"], o)
+    return p if _segments_cross(q) else q
 
 
 def outlines_from_image(
@@ -1225,6 +1251,7 @@ def outlines_from_image(
     border: str = "refuse",
     refine: bool = True,
     iterations: int = 5,
+    symmetric: bool = True,
 ) -> list[np.ndarray]:
     """Sub-pixel outlines of the objects in a colour photograph.
 
@@ -1268,6 +1295,17 @@ def outlines_from_image(
         estimated.  Without it the binary GrabCut mask is used.
     iterations : int
         GrabCut iterations.
+    symmetric : bool
+        With ``refine``, where a refined outline and its own mirror image under its
+        fitted harmonic homology disagree by more than 1 px (a bite or a bump on one
+        side), move it towards their average (all of the way beyond 2 px), weighted
+        towards the side whose edge the image confirms (:func:`sorjax._detect.symmetric_average`): a surface of revolution's
+        outline is its own mirror image, so its two sides are two estimates of one
+        curve.  Smaller disagreements are left: they are the noise the calibration
+        measures.  Outlines that are not symmetric within the judge's limit (about 1 px)
+        or touch the image border are left as they are.  On photo-like renders the
+        median distance to the true silhouette fell from 0.51 to 0.43 px RMS.  The error
+        attributes below are those of the outline before the averaging.
 
     Returns
     -------
@@ -1303,6 +1341,7 @@ def outlines_from_image(
     min_area, smooth = _check_options(min_area, smooth, border)
     iterations = integer(iterations, "iterations", lo=1, hi=50, what="GrabCut iterations")
     refine = boolean(refine, "refine")
+    symmetric = boolean(symmetric, "symmetric") and refine
     src = _as_bgr(image)
     img = src.u8
     H, W = img.shape[:2]
@@ -1315,7 +1354,7 @@ def outlines_from_image(
             if sg is not None:
                 segs.append((k, b) + sg + (math.nan,))
         out = _finish_all(src, segs, refine=refine, min_area=min_area, smooth=smooth, border=border,
-                          iterations=int(iterations))
+                          iterations=int(iterations), symmetric=symmetric)
         if not out:
             raise ValueError(
                 f"no object outline could be extracted from any of the {len(bxs)} boxes (see the "
@@ -1351,7 +1390,7 @@ def outlines_from_image(
         if sg is not None:
             segs.append((k, ib) + sg + (sym,))
     out = _finish_all(src, segs, refine=refine, min_area=min_area, smooth=smooth, border=border,
-                      iterations=int(iterations))
+                      iterations=int(iterations), symmetric=symmetric)
     limit, kept = detect.max_error_px, []
     for p in out:
         if not getattr(p, "outline_error", 0.0) > limit:  # NaN (no refinement): kept

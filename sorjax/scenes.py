@@ -1687,21 +1687,36 @@ def _check_sigma(sigma) -> float:
     return sigma
 
 
-def distance_to_polyline(points, polyline, chunk: int = 256) -> np.ndarray:
-    """Unsigned distance (pixels) from each of ``points`` (K, 2) to the closed polyline
-    ``polyline`` (M, 2): the nearest of its M segments, searched exhaustively (O(K M),
-    in chunks of ``chunk`` points).  For checking outlines against an exact one."""
+def closest_points_on_polyline(points, polyline, chunk: int = 256) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The nearest point of the closed polyline ``polyline`` (M, 2) to each of ``points``
+    (K, 2), searched exhaustively over its M segments (O(K M), in chunks of ``chunk``
+    points): ``(foot (K, 2), segment (K,) int, t (K,))``, the foot being
+    ``polyline[segment] + t (polyline[segment + 1] - polyline[segment])`` with ``t`` in
+    [0, 1] (the segment after the last vertex closes the polyline).  Units are the
+    points' (pixels)."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     a = np.asarray(polyline, dtype=np.float64).reshape(-1, 2)
     ab = np.roll(a, -1, axis=0) - a
     L2 = np.maximum(np.sum(ab * ab, axis=1), 1e-300)
-    out = np.empty(len(pts))
+    seg = np.empty(len(pts), dtype=np.intp)
+    tt = np.empty(len(pts))
     for s in range(0, len(pts), chunk):
         ap = pts[s : s + chunk, None, :] - a[None]
         t = np.clip(np.sum(ap * ab[None], -1) / L2[None], 0.0, 1.0)
         d = ap - t[..., None] * ab[None]
-        out[s : s + chunk] = np.sqrt(np.min(np.sum(d * d, -1), axis=1))
-    return out
+        k = np.argmin(np.sum(d * d, -1), axis=1)
+        seg[s : s + chunk] = k
+        tt[s : s + chunk] = t[np.arange(len(k)), k]
+    return a[seg] + tt[:, None] * ab[seg], seg, tt
+
+
+def distance_to_polyline(points, polyline, chunk: int = 256) -> np.ndarray:
+    """Unsigned distance (pixels) from each of ``points`` (K, 2) to the closed polyline
+    ``polyline`` (M, 2): the nearest of its M segments, searched exhaustively
+    (:func:`closest_points_on_polyline`).  For checking outlines against an exact one."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    foot, _, _ = closest_points_on_polyline(pts, polyline, chunk)
+    return np.hypot(*(pts - foot).T)
 
 
 def outline_normals(outline) -> np.ndarray:
