@@ -78,6 +78,15 @@ smoothing window, ``b`` the RMS of the offsets between the two independent edge
 estimates (the unmixed segmentation and the gradient maximum: what either may carry as
 bias), and ``q`` the rejected fraction times ``reject_px`` (where the edge could not be
 confirmed).
+
+Symmetric averaging (:func:`symmetric_average`)
+-----------------------------------------------
+A refined outline and its own mirror image under its fitted homology are two estimates of
+one curve.  Where they disagree by more than ``average_px`` (a bite or bump on one side),
+the outline moves towards their average, weighted by where the image confirms the edge
+(``unconfirmed_weight`` where it does not); nearer, each side keeps its own error, which
+the calibration's symmetry residuals measure.  The error attributes are those of the
+outline before the averaging.
 """
 
 from __future__ import annotations
