@@ -1181,7 +1181,9 @@ def _finish_all(src: _Image, segs, *, refine, min_area, smooth, border, iteratio
     (:func:`sorjax.render.random_photo_set` seeds 100-109, one camera, 4 images each)
     the objects found went from 47 to 49 of 102 and the median outline RMS from 0.47 to
     0.43 px; where GrabCut's colours cannot tell a leak from the object (a grey bottle
-    neck before a grey box), the outline stays as it was."""
+    neck before a grey box), the outline stays as it was.  With ``symmetric`` the final
+    outline is then averaged with its mirror image where the two disagree
+    (:func:`_averaged`).
     from ._detect import DetectOptions, ImageOutline, mirror_grabcut, needs_recut, outline_quality
 
     o = DetectOptions()
@@ -1299,9 +1301,9 @@ def outlines_from_image(
         With ``refine``, where a refined outline and its own mirror image under its
         fitted harmonic homology disagree by more than 1 px (a bite or a bump on one
         side), move it towards their average (all of the way beyond 2 px), weighted
-        towards the side whose edge the image confirms (:func:`sorjax._detect.symmetric_average`): a surface of revolution's
-        outline is its own mirror image, so its two sides are two estimates of one
-        curve.  Smaller disagreements are left: they are the noise the calibration
+        towards the side whose edge the image confirms
+        (:func:`sorjax._detect.symmetric_average`): a surface of revolution's outline
+        is its own mirror image, so its two sides are two estimates of one curve.  Smaller disagreements are left: they are the noise the calibration
         measures.  Outlines that are not symmetric within the judge's limit (about 1 px)
         or touch the image border are left as they are.  On photo-like renders the
         median distance to the true silhouette fell from 0.51 to 0.43 px RMS.  The error
