@@ -835,17 +835,18 @@ def symmetric_average(p: np.ndarray, W, confirmed: np.ndarray, o: DetectOptions)
     p = np.asarray(p, np.float64)
     m = np.asarray(transfer(np.asarray(W, np.float64), p))
     foot, seg, t = closest_points_on_polyline(p, m)
-    w = np.where(np.asarray(confirmed, bool), 1.0, float(o.unconfirmed_weight))
     spacing = float(np.mean(np.hypot(*(np.roll(p, -1, axis=0) - p).T)))
-    if o.weight_sigma > 0:
-        w = np.maximum(_periodic_gauss(w[:, None], o.weight_sigma / spacing, 0)[:, 0], float(o.unconfirmed_weight))
+
+    def along(v):  # smoothed along the outline by weight_sigma px of arc
+        return _periodic_gauss(v[:, None], o.weight_sigma / spacing, 0)[:, 0] if o.weight_sigma > 0 else v
+
+    w = np.maximum(along(np.where(np.asarray(confirmed, bool), 1.0, float(o.unconfirmed_weight))),
+                   float(o.unconfirmed_weight))
     w_mirror = w[seg] * (1.0 - t) + w[(seg + 1) % len(p)] * t
     q = (w[:, None] * p + w_mirror[:, None] * foot) / (w + w_mirror)[:, None]
     if o.average_px <= 0:
         return q
-    share = np.clip(np.hypot(*(foot - p).T) / o.average_px - 1.0, 0.0, 1.0)
-    if o.weight_sigma > 0:
-        share = _periodic_gauss(share[:, None], o.weight_sigma / spacing, 0)[:, 0]
+    share = along(np.clip(np.hypot(*(foot - p).T) / o.average_px - 1.0, 0.0, 1.0))
     return p + share[:, None] * (q - p)
 
 

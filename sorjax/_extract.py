@@ -1234,10 +1234,7 @@ def _averaged(src: _Image, p: np.ndarray, hom, o) -> np.ndarray:
     from ._detect import refine_to_edges, symmetric_average, symmetry_limit
     from ._outline import _segments_cross
 
-    H, W = src.shape
-    if hom is None or not float(hom.rms) <= symmetry_limit(p, o):
-        return p
-    if (p.min(0) < 1.0).any() or p[:, 0].max() > W - 2.0 or p[:, 1].max() > H - 2.0:
+    if hom is None or not float(hom.rms) <= symmetry_limit(p, o) or _border_sides(p, src.shape, margin=1.5):
         return p
     _, stats = refine_to_edges((src.f64, src.shape), p, o, keep=True)
     q = symmetric_average(p, hom.W, stats["kept"], o)

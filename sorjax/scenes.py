@@ -1693,9 +1693,13 @@ def closest_points_on_polyline(points, polyline, chunk: int = 256) -> tuple[np.n
     points): ``(foot (K, 2), segment (K,) int, t (K,))``, the foot being
     ``polyline[segment] + t (polyline[segment + 1] - polyline[segment])`` with ``t`` in
     [0, 1] (the segment after the last vertex closes the polyline).  Units are the
-    points' (pixels)."""
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    a = np.asarray(polyline, dtype=np.float64).reshape(-1, 2)
+    points' (pixels).  Raises ``ValueError`` for a polyline that is not an (M, 2) array
+    of M >= 3 finite points, or points that are not finite (x, y) pairs."""
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.size % 2 or not np.all(np.isfinite(pts)):
+        raise ValueError(f"points must be finite (x, y) pairs (an (K, 2) array), got shape {pts.shape}")
+    pts = pts.reshape(-1, 2)
+    a = _check_outline(polyline)
     ab = np.roll(a, -1, axis=0) - a
     L2 = np.maximum(np.sum(ab * ab, axis=1), 1e-300)
     seg = np.empty(len(pts), dtype=np.intp)

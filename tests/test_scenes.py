@@ -395,3 +395,19 @@ def test_paper_noise_bound_property(sigma, smooth, seed, n):
     y = S.paper_noise(o, sigma, seed, smooth_px=smooth)
     d = y - o
     assert np.all(np.hypot(d[:, 0], d[:, 1]) <= sigma + 1e-9)
+
+
+def test_closest_points_on_polyline_against_each_segment_and_bad_input():
+    rng = np.random.default_rng(0)
+    poly = rng.normal(size=(40, 2)) * 10.0
+    pts = rng.normal(size=(300, 2)) * 10.0
+    foot, seg, t = S.closest_points_on_polyline(pts, poly, chunk=64)
+    a, b = poly, np.roll(poly, -1, axis=0)
+    np.testing.assert_allclose(foot, a[seg] + t[:, None] * (b[seg] - a[seg]), atol=1e-12)
+    for x, f in zip(pts, foot):  # no point of any segment is nearer than the foot
+        u = np.clip(np.sum((x - a) * (b - a), 1) / np.sum((b - a) ** 2, 1), 0, 1)
+        assert np.hypot(*(x - f)) <= np.min(np.hypot(*(x - a - u[:, None] * (b - a)).T)) + 1e-12
+    with pytest.raises(ValueError, match="M >= 3"):
+        S.closest_points_on_polyline(pts, poly[:2])
+    with pytest.raises(ValueError, match="finite"):
+        S.closest_points_on_polyline(np.array([[0.0, np.nan]]), poly)

@@ -56,8 +56,7 @@ from jaxtyping import Array, Bool, Float, Int
 from .._field import DistanceField
 from .._homology import homology_matrix, symmetry_checked, symmetry_feet, symmetry_residuals, transfer
 from .._noise import (estimate_noise, jacobian_and_normal_sensitivity, knot_spacing_px, noise_geometry, noise_meat,
-                      sample_normals, smoothed_outline,
-                      unit_blocks)
+                      sample_normals, smoothed_outline, unit_blocks)
 from .._solvers import Solved, is_stale, polish_traced, solvers, until_fresh_traced
 from ._options import Options
 from ._prepare import Views
