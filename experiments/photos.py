@@ -38,7 +38,7 @@ Issue 17's targets (automatic column): >= 90 % found, median RMS <= 0.3 px, >= 9
 them within 1 px, every camera ok or refused, no confident wrong K over >= 30 sets.
 
     python experiments/photos.py [--sets 5] [--seed 0] [--boxes] [--contours] [--no-auto] [--no-masks]
-                                 [--save DIR] [--outlines DIR] [--mask-errors PX ...] [--quick]
+                                 [--save DIR] [--outlines DIR] [--mask-errors PX ...] [--no-symmetric] [--quick]
 
 Cost: a set renders in about 15 s of CPU (most of it the exact silhouettes); the run's
 time is mostly ``sorjax.calibrate`` (one call per camera and column, 10 to 16 views,
@@ -84,7 +84,7 @@ def _first_line(text: str, n: int = 110) -> str:
 _ATTRS = ("outline_error", "edge_contrast", "accepted", "symmetry_rms")
 
 
-def _extract(name: str, r: render.Rendering, store: str | None, stem: str):
+def _extract(name: str, r: render.Rendering, store: str | None, stem: str, symmetric: bool = True):
     """The outlines of ``r`` from the image (``name`` "auto" or "boxes"), or the
     exception; with ``store`` (a folder, ``--outlines``) they are read from
     ``store/stem_name.pkl`` when there and written there otherwise (plain arrays and
@@ -100,12 +100,12 @@ def _extract(name: str, r: render.Rendering, store: str | None, stem: str):
         from sorjax._detect import ImageOutline
         return [ImageOutline(pts, **attrs) for pts, attrs in saved]
     if name == "auto":
-        res, _ = _call(sorjax.outlines_from_image, r.image)
+        res, _ = _call(sorjax.outlines_from_image, r.image, symmetric=symmetric)
     else:
         w, h = r.image_size
         bx = [(max(0, b[0] - BOX_MARGIN), max(0, b[1] - BOX_MARGIN), min(w - 1, b[2] + BOX_MARGIN),
                min(h - 1, b[3] + BOX_MARGIN)) for b in r.boxes]
-        res, _ = _call(sorjax.outlines_from_image, r.image, bx)
+        res, _ = _call(sorjax.outlines_from_image, r.image, bx, symmetric=symmetric)
     if path:
         os.makedirs(store, exist_ok=True)
         saved = res if isinstance(res, Exception) else [
@@ -264,7 +264,7 @@ def run_set(seed: int, args, columns: dict[str, Column]) -> None:
                 label = f"set {seed} camera {ci} image {k}"
                 t1 = time.perf_counter()
                 if name in IMAGE_COLUMNS:
-                    res = _extract(name, r, args.outlines, f"set{seed}_cam{ci}_img{k}")
+                    res = _extract(name, r, args.outlines, f"set{seed}_cam{ci}_img{k}", not args.no_symmetric)
                 elif name == "contours":
                     res = [c[:, 0, :].astype(np.float64) for o in r.objects
                            for c in cv2.findContours((o.coverage >= 0.5).astype(np.uint8), cv2.RETR_EXTERNAL,
@@ -308,6 +308,9 @@ def main(argv=None):
     ap.add_argument("--mask-errors", metavar="PX", type=float, nargs="+", default=[],
                     help="also calibrate the masks' outlines declaring these outline errors (px): how accurate must "
                          "outlines be for the perspective gate to let a camera through (a column masks@PX each)")
+    ap.add_argument("--no-symmetric", action="store_true",
+                    help="outlines_from_image(symmetric=False): no averaging with the outlines' mirror images (the "
+                         "outlines before session 23), to compare; with --outlines, a folder of its own")
     ap.add_argument("--quick", action="store_true", help="2 sets")
     args = ap.parse_args(argv)
     if args.quick:
@@ -324,7 +327,9 @@ def main(argv=None):
     if not names:
         ap.error("no column left to run (drop --no-auto or --no-masks, or add --boxes / --contours / --mask-errors)")
     print(f"sorjax photo-like test bed: {args.sets} set(s), seeds {args.seed}..{args.seed + args.sets - 1}, "
-          f"{args.cameras} cameras x {args.images} images; columns {', '.join(names)}", flush=True)
+          f"{args.cameras} cameras x {args.images} images; columns {', '.join(names)}"
+          + ("; outlines not averaged with their mirror images (--no-symmetric)" if args.no_symmetric else ""),
+          flush=True)
     t0 = time.perf_counter()
     for s in range(args.seed, args.seed + args.sets):
         run_set(s, args, columns)
