@@ -54,6 +54,7 @@ intrinsics the views do not determine at all get an infinite variance (see
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import equinox as eqx
@@ -90,7 +91,16 @@ class BundleProblem(eqx.Module):
     zero: its residuals are zero and its ``(theta, rho)`` have zero Jacobian columns
     (the Gauss-Newton step's truncated SVD, the damped Levenberg-Marquardt step and
     :func:`covariance`'s pseudo-inverse leave them alone; :func:`n_params` does not
-    count them)."""
+    count them).
+
+    ``noise`` (V,): each view's outline noise floor (normalised units, RMS along the
+    normal; 0: none), or None (none, the program traced before floors existed).  An
+    outline that was made more symmetric than it was measured (averaged with its own
+    mirror image, :func:`sorjax._detect.symmetric_average`) no longer shows its noise
+    in its residuals; every estimate of the noise level (:func:`floored_rss`) then takes
+    a view's residual sum of squares as at least ``n_j noise_j^2`` (``n_j`` its samples
+    counted), so that the covariance and the model checks are not told that the views
+    are noise-free.  The estimate itself does not depend on it."""
 
     fields: DistanceField
     samples: Float[Array, "V N 2"]
@@ -98,6 +108,7 @@ class BundleProblem(eqx.Module):
     aspect: Float[Array, ""]
     n_dist: int = eqx.field(static=True, default=0)
     fixed: Float[Array, "4"] | None = None
+    noise: Float[Array, " V"] | None = None
 
     @property
     def used(self):
@@ -544,7 +555,8 @@ def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Optio
     null = lam <= NULL_EIGENVALUE * jnp.max(jnp.abs(lam))
     F_inv = (U * jnp.where(null, 0.0, 1.0 / jnp.where(null, 1.0, lam))) @ U.T
     geo = noise_geometry_at(smooth, feet_s, scale, a_s)
-    ell, level = estimate_noise(geo, r.reshape(geo.a.shape), J, options.noise_ell_min_px, options.noise_ell_max_px)
+    ell, level = estimate_noise(geo, r.reshape(geo.a.shape), J, options.noise_ell_min_px, options.noise_ell_max_px,
+                                rss=floored_rss(r, problem))
     meat = level * noise_meat(G, unit_blocks(geo, ell))
     cov_k = F_inv @ meat @ F_inv
 
@@ -572,11 +584,23 @@ def noise_blocks(problem: BundleProblem, feet, T, ell, s2, a) -> Float[Array, "V
     return S * (s2 * jnp.sum(problem.weights) / jnp.maximum(tr, 1e-300))
 
 
+def floored_rss(r, problem: BundleProblem):
+    """The residual sum of squares ``sum_j max(|r_j|^2, n_j noise_j^2)`` of the
+    residuals ``r`` ((V N,) or (V, N)), each view's at least its noise floor
+    (:attr:`BundleProblem.noise`; ``n_j`` the sum of its weights); ``|r|^2`` without
+    floors."""
+    rss = jnp.sum(jnp.reshape(r, problem.weights.shape) ** 2, axis=1)
+    if problem.noise is None:
+        return jnp.sum(rss)
+    return jnp.sum(jnp.maximum(rss, jnp.sum(problem.weights, axis=1) * problem.noise**2))
+
+
 def residual_variance(r, y, problem: BundleProblem, n_fixed=0):
     """``s^2 = |r|^2 / (n - p)``: the residual variance of a fit with ``p`` parameters
-    (:func:`n_params`, less ``n_fixed`` held ones) to ``n`` weighted samples."""
+    (:func:`n_params`, less ``n_fixed`` held ones) to ``n`` weighted samples, each
+    view's residuals counted as at least its noise floor (:func:`floored_rss`)."""
     dof = jnp.maximum(jnp.sum(problem.weights) - (n_params(y, problem) - n_fixed), 1)
-    return jnp.sum(r**2) / dof
+    return floored_rss(r, problem) / dof
 
 
 def _step_length(J, r, s2):
@@ -592,7 +616,7 @@ def smoothed_problem(problem: BundleProblem, smooth_px, scale) -> BundleProblem:
     What :func:`covariance` reads the Jacobian from."""
     N = problem.samples.shape[1]
     fields, samples = jax.vmap(lambda f: smoothed_outline(f, N, smooth_px, scale))(problem.fields)
-    return BundleProblem(fields, samples, problem.weights, problem.aspect, problem.n_dist, problem.fixed)
+    return dataclasses.replace(problem, fields=fields, samples=samples)
 
 
 def noise_geometry_at(problem: BundleProblem, feet, scale, a) -> NoiseGeometry:
@@ -613,13 +637,15 @@ def _placeholder_outline(m: int):
     return jnp.stack([jnp.cos(t), jnp.sin(t)], axis=-1)
 
 
-def make_problem(points_n, n_samples: int, aspect=None, inliers=None, used=None, fixed=None) -> BundleProblem:
+def make_problem(points_n, n_samples: int, aspect=None, inliers=None, used=None, fixed=None,
+                 noise=None) -> BundleProblem:
     """The :class:`BundleProblem` of (V, M, 2) normalised outline points: fields,
     ``n_samples`` samples per view (:func:`sorjax._field.setup`), their corner weights
     times the optional (V, N) 0/1 ``inliers`` mask and the (V,) bool ``used`` mask (a
     masked view keeps its slot: a placeholder field, all weights zero); ``aspect`` the
     known ``fu / fv``, NaN or None (free); ``fixed`` (4,) the chart values of intrinsics
-    held fixed (:func:`fixed_chart`; NaN: free) or None.
+    held fixed (:func:`fixed_chart`; NaN: free) or None; ``noise`` (V,) the views' noise
+    floors (normalised units; :attr:`BundleProblem.noise`) or None.
 
     Pure (jit / vmap / grad); nothing is kept between calls: a caller that needs the
     problem twice builds it once and passes it on."""
@@ -629,20 +655,17 @@ def make_problem(points_n, n_samples: int, aspect=None, inliers=None, used=None,
     inl = jnp.ones((V, n_samples)) if inliers is None else jnp.asarray(inliers, jnp.float64)
     a = jnp.asarray(jnp.nan if aspect is None else aspect, jnp.float64)
     problem = _build_problem(pts, used, inl, a, n_samples)
-    if fixed is None:
-        return problem
-    return BundleProblem(problem.fields, problem.samples, problem.weights, problem.aspect, problem.n_dist,
-                         jnp.asarray(fixed, jnp.float64))
+    return dataclasses.replace(problem, fixed=None if fixed is None else jnp.asarray(fixed, jnp.float64),
+                               noise=None if noise is None else jnp.asarray(noise, jnp.float64))
 
 
 def with_model(base: BundleProblem, aspect, fixed=None) -> BundleProblem:
     """``base`` (:func:`make_problem` of some outlines, no aspect ratio, nothing fixed)
     with the known aspect ratio ``aspect`` (NaN: free) and the chart values ``fixed``
-    (:func:`fixed_chart`; None: nothing fixed): one problem's fields, samples and
-    weights serve every model of a calibration."""
+    (:func:`fixed_chart`; None: nothing fixed): one problem's fields, samples, weights
+    and noise floors serve every model of a calibration."""
     a = jnp.asarray(jnp.nan if aspect is None else aspect, jnp.float64)
-    return BundleProblem(base.fields, base.samples, base.weights, a, base.n_dist,
-                         None if fixed is None else jnp.asarray(fixed, jnp.float64))
+    return dataclasses.replace(base, aspect=a, fixed=None if fixed is None else jnp.asarray(fixed, jnp.float64))
 
 
 @functools.partial(jax.jit, static_argnames=("n_samples",))
@@ -1126,7 +1149,7 @@ class DistortedBundleOut(eqx.Module):
 
 @functools.partial(jax.jit, static_argnames=("distortion",))
 def bundle_estimate_distorted(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options: Options = Options(),
-                              distortion: str = "k1", fixed=None) -> DistortedBundleOut:
+                              distortion: str = "k1", fixed=None, base=None) -> DistortedBundleOut:
     """The joint bundle with OpenCV's radial distortion, ``2V + 4 + n`` parameters
     (``n = 1`` for "k1", 2 for "k1k2"; ``2V + 3 + n`` for a known aspect ratio): each
     sample ``x`` of an observed outline is undistorted, moved by its view's homology,
@@ -1141,18 +1164,19 @@ def bundle_estimate_distorted(points_n, used, inliers, l_n, seeds, seed_ok, aspe
     outline points in the normalised frame ``x_n = T x``; ``T`` (3, 3) the normalising
     similarity; ``seeds`` (S, 4) normalised; ``aspect`` NaN: free), and
     ``distortion``: "k1" or "k1k2"; ``fixed`` (4,) intrinsics held fixed, px, NaN:
-    free, as :func:`bundle_estimate`'s).
+    free, and ``base`` the problem of ``points_n`` or None, as :func:`bundle_estimate`'s).
 
     Returns a :class:`DistortedBundleOut` (pixels; ``k`` dimensionless)."""
     n = DISTORTION_MODELS.get(distortion, 0)
     if n == 0:
         raise ValueError(f"distortion must be 'k1' or 'k1k2' (use bundle_estimate for none); got {distortion!r}")
-    free = bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options, fixed)
+    free = bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options, fixed, base=base)
     used = jnp.asarray(used, bool)
     T = jnp.asarray(T, jnp.float64)
-    base = make_problem(points_n, options.n_samples, aspect, inliers, used,
-                        None if fixed is None else fixed_chart(fixed, T))
-    problem = BundleProblem(base.fields, base.samples, base.weights, base.aspect, n, base.fixed)
+    fixed_n = None if fixed is None else fixed_chart(fixed, T)
+    pinhole = (make_problem(points_n, options.n_samples, aspect, inliers, used, fixed_n) if base is None
+               else with_model(base, aspect, fixed_n))
+    problem = dataclasses.replace(pinhole, n_dist=n)
     frozen = jax.lax.stop_gradient(problem)
     y_seeds, ok_seeds = distorted_seeds(jax.lax.stop_gradient(free.y), jax.lax.stop_gradient(l_n), used,
                                         jax.lax.stop_gradient(seeds), seed_ok, n)

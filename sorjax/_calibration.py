@@ -529,7 +529,7 @@ def verdict_notes(r, method: str, a, points=None) -> list[str]:
     tips = ("; ".join(_advice_for(r, points, a is None)) + ".") if points is not None else "add views."
     return [
         f"weak geometry: the focal length is uncertain by {100 * float(r.weak):.3g} % (1 sigma, for a "
-        f"symmetry residual of {max(float(r.s_px), Options().residual_floor_px):.2g} px): " + tips
+        f"symmetry residual (or outline noise) of {max(float(r.s_px), Options().residual_floor_px):.2g} px): " + tips
     ]
 
 
@@ -729,30 +729,32 @@ def view_homologies(homologies, n_samples: int) -> ViewHomologies:
 
 
 @functools.partial(jax.jit, static_argnames=("method",))
-def _core(points, homs, aspect, options, image_size, valid, fixed=None, *, method: str = "bundle"):
+def _core(points, homs, aspect, options, image_size, valid, fixed=None, noise=None, *, method: str = "bundle"):
     """One method's estimate (:func:`sorjax.core.calibrate_homologies`): one compiled
     program per method and padded view count.  The bundle's program holds no linear
     method beside it (the three linear methods' covariances in the same program made
     it a quarter larger, for the one result a call returns); a linear method's program
     holds no solver.  ``fixed``: intrinsics held fixed (px, NaN: free) or None
-    (another compiled program: the one of a free camera stays as it was)."""
+    (another compiled program: the one of a free camera stays as it was); ``noise``
+    (V,) the views' noise floors, px (0: none)."""
     return calibrate_homologies(points, homs, method, aspect, options=options, image_size=image_size, valid=valid,
-                                fixed=fixed)
+                                fixed=fixed, noise=noise)
 
 
 @functools.partial(jax.jit, static_argnames=("distortion",))
-def _core_distorted(points, homs, aspect, options, image_size, valid, distortion, fixed=None):
+def _core_distorted(points, homs, aspect, options, image_size, valid, distortion, fixed=None, noise=None):
     """The bundle with radial distortion (``distortion`` "k1" or "k1k2")."""
     return calibrate_homologies(points, homs, "bundle", aspect, options=options, image_size=image_size, valid=valid,
-                                distortion=distortion, fixed=fixed)
+                                distortion=distortion, fixed=fixed, noise=noise)
 
 
 def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, options: Options, image_size,
-              distortion: str = "none", fixed=None, leave_out: Sequence[int] = ()):
+              distortion: str = "none", fixed=None, leave_out: Sequence[int] = (), noise=None):
     """The core on ``V`` views padded to :func:`_bucket` (copies of view 0, masked);
     returns the result of ``method`` as numpy, cut back to ``V`` views.  ``fixed``
     (4,) ``(fu, fv, u0, v0)`` px held fixed (NaN: free), or None; ``leave_out``: views
-    masked out as well (the same compiled program)."""
+    masked out as well (the same compiled program); ``noise`` (V,) the views' noise
+    floors, px (None: 0, the same compiled program)."""
     V = points.shape[0]
     B = _bucket(V)
     pad = lambda x: np.concatenate([x, np.repeat(x[:1], B - V, axis=0)]) if B > V else x  # noqa: E731
@@ -761,10 +763,11 @@ def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, opt
     args = (pad(points), jax.tree_util.tree_map(pad, homs), np.float64(aspect), options,
             np.asarray(image_size, np.float64), valid)
     fixed = None if fixed is None else np.asarray(fixed, np.float64)
+    noise = pad(np.zeros(V) if noise is None else np.asarray(noise, np.float64))
     if distortion == "none":
-        r = _core(*args, fixed, method=method)
+        r = _core(*args, fixed, noise, method=method)
     else:
-        r = _core_distorted(*args, distortion, fixed)
+        r = _core_distorted(*args, distortion, fixed, noise)
     r = jax.tree_util.tree_map(np.asarray, r)
     per_view = ("used", "drop_reason", "view_rms", "v_x", "l_s")
     r = eqx.tree_at(lambda x: [getattr(x, k) for k in per_view], r, [getattr(r, k)[:V] for k in per_view])
@@ -779,7 +782,7 @@ def _estimate(K) -> np.ndarray:
 
 
 def jackknife(r, points: np.ndarray, homs: ViewHomologies, method: str, aspect, options: Options, image_size,
-              fixed=None, left_out: Sequence[int] = ()):
+              fixed=None, left_out: Sequence[int] = (), noise=None):
     """The core result ``r`` checked by leaving out each used view in turn, for
     outlines of measured quality (``calibrate(outline_error="measured")``).
 
@@ -795,8 +798,8 @@ def jackknife(r, points: np.ndarray, homs: ViewHomologies, method: str, aspect, 
     are set to NaN and the result code becomes ``degenerate``.  Returns ``(r, notes)``: the result with ``K``, ``covariance``,
     ``std``, ``determined``, ``omega`` and ``result`` updated, and warning texts (none
     when nothing was determined).  ``left_out``: views ``r`` was computed without
-    (:func:`dominant_view`, left out by :func:`calibrate`), left out of every run.  Costs one run of the
-    compiled core per used view."""
+    (:func:`dominant_view`, left out by :func:`calibrate`), left out of every run; ``noise``: the
+    views' noise floors (px) or None.  Costs one run of the compiled core per used view."""
     det = np.asarray(r.determined, bool)
     if not det.any() or code_name(r.result) not in ("successful", "degenerate", "only_principal_point"):
         return r, []
@@ -806,7 +809,7 @@ def jackknife(r, points: np.ndarray, homs: ViewHomologies, method: str, aspect, 
     loo = np.full((n, 4), np.nan)
     for k, i in enumerate(used):
         ri = _run_core(points, homs, method, aspect, options, image_size, "none", fixed,
-                       leave_out=[int(i), *left_out])
+                       leave_out=[int(i), *left_out], noise=noise)
         loo[k] = _estimate(ri.K_raw)
     held = np.zeros(4, bool) if fixed is None else np.isfinite(np.asarray(fixed, np.float64))
     loo[:, held] = est[held]
@@ -908,6 +911,27 @@ def _check_outline_error(outline_error):
     return px(outline_error), None, False
 
 
+def _outline_noise(outline_noise, outlines, n: int):
+    """:func:`calibrate`'s ``outline_noise`` as (n,) px (0: none), or None (none):
+    given, or the outlines' own ``noise_rms`` attributes."""
+    if outline_noise is None:
+        own = [getattr(o, "noise_rms", None) for o in outlines] if isinstance(outlines, (list, tuple)) else []
+        own = [float(e) if _is_number(e) and math.isfinite(e) and e > 0 else 0.0 for e in own]
+        return np.array(own) if len(own) == n and any(own) else None
+    bad = (f"outline_noise must be a finite number of pixels >= 0, one such number per outline (NaN: none), or "
+           f"None; got {outline_noise!r:.80}.")
+    vals = np.atleast_1d(np.asarray(outline_noise, dtype=object))
+    if vals.ndim != 1 or not all(_is_number(v) and (math.isnan(v) or (math.isfinite(v) and v >= 0)) for v in vals):
+        raise ValueError(bad)
+    vals = np.nan_to_num(vals.astype(np.float64), nan=0.0)
+    if vals.size == 1:
+        return np.full(n, vals[0])
+    if vals.size != n:
+        raise ValueError(f"outline_noise: got {vals.size} values for {n} outlines; give one number (px) per outline, "
+                         "in the same order, or one number for all.")
+    return vals
+
+
 def _own_errors(outlines):
     """The outlines' own error estimates (px; NaN: none): the ``outline_error``
     attribute an extractor attaches to its outline arrays (sorjax's image path does),
@@ -965,6 +989,7 @@ def calibrate(
     distortion: str = "none",
     principal_point=None,
     focal_length: float | None = None,
+    outline_noise: float | Sequence[float] | None = None,
     throw: bool = False,
 ) -> Calibration:
     """Calibrate a camera from the outlines of surfaces of revolution.
@@ -1040,6 +1065,15 @@ def calibrate(
             bundle only.  Two views are still needed unless the principal point is
             fixed too (one view puts the principal point at either of two places).
             Fixed intrinsics have a standard deviation of 0.
+        outline_noise: each outline's noise (px RMS along the normal) when its
+            symmetry residual understates it: one number, one per outline (NaN: none),
+            or None (default: the ``noise_rms`` attribute of outline arrays that carry
+            one, as :func:`sorjax.outlines_from_image`'s do, else none).  An outline
+            averaged with its own mirror image (:func:`sorjax.outlines_from_image`
+            does so where its two sides disagree) fits its homology better than it
+            was measured; the calibration's noise level (covariance, model checks,
+            perspective evidence) then takes each view's residuals as at least this
+            (:attr:`sorjax._bundle.BundleProblem.noise`).  ``K`` does not depend on it.
         throw: raise :class:`CalibrationError` instead of returning a failed result.
 
     Returns:
@@ -1088,6 +1122,7 @@ def calibrate(
     pp_fixed, f_fixed = _check_fixed(principal_point, focal_length, image_size, method)
     prepared = _as_outlines(outlines, n_points)
     outs, smoothed = [o for o, _ in prepared], [j for _, j in prepared]
+    noise = _outline_noise(outline_noise, outlines, len(outs))
     if per_outline is not None and len(per_outline) != len(outs):
         raise ValueError(f"outline_error: got {len(per_outline)} per-outline errors for {len(outs)} outlines; give one "
                          "number (px) per outline, in the same order, or one number for all, or 'measured'.")
@@ -1152,7 +1187,7 @@ def calibrate(
         fixed = (math.nan, math.nan if f_fixed is None else f_fixed) + (pp_fixed or (math.nan, math.nan))
     aspect = math.nan if aspect_ratio is None else float(aspect_ratio)
     size = (math.nan, math.nan) if image_size is None else image_size
-    run = functools.partial(_run_core, points, homs, method, aspect)
+    run = functools.partial(_run_core, points, homs, method, aspect, noise=noise)
     r = run(options, size, distortion, fixed)
     # outlines of measured quality (found in images): a view the consistency check blames
     # almost alone is left out, and the rest calibrated again (Options.measured_leave_out)
@@ -1171,7 +1206,8 @@ def calibrate(
         r = run(options, size, distortion, fixed, leave_out=list(left_out))
 
     if measure and distortion == "none":
-        r, jack_notes = jackknife(r, points, homs, method, aspect, options, size, fixed, left_out=list(left_out))
+        r, jack_notes = jackknife(r, points, homs, method, aspect, options, size, fixed, left_out=list(left_out),
+                                  noise=noise)
         floor_note += jack_notes
     dup_of = np.asarray(r.checks.duplicate_of)
     notes = (floor_note + view_notes(homs, r.drop_reason, dup_of=dup_of) + model_notes(r, outline_error, fixed)

@@ -199,6 +199,11 @@ class ImageOutline(np.ndarray):
         RMS symmetry residual (px) of the harmonic homology fitted to the
         segmentation's outline when the object was found automatically (NaN with a
         box).
+    noise_rms : float
+        RMS symmetry residual (px) of the refined outline before it was averaged with
+        its own mirror image (:func:`symmetric_average`; NaN when it was not): the
+        noise that the averaged outline no longer shows, which :func:`sorjax.calibrate`
+        takes as each view's noise floor (its ``outline_noise``).
 
     Arithmetic returns plain arrays' values with these attributes copied; use
     ``np.asarray(o)`` for a plain array."""
@@ -207,18 +212,20 @@ class ImageOutline(np.ndarray):
     edge_contrast: float
     accepted: float
     symmetry_rms: float
+    noise_rms: float
 
     def __new__(cls, points, *, outline_error=math.nan, edge_contrast=math.nan, accepted=math.nan,
-                symmetry_rms=math.nan):
+                symmetry_rms=math.nan, noise_rms=math.nan):
         obj = np.asarray(points, dtype=np.float64).view(cls)
         obj.outline_error = float(outline_error)
         obj.edge_contrast = float(edge_contrast)
         obj.accepted = float(accepted)
         obj.symmetry_rms = float(symmetry_rms)
+        obj.noise_rms = float(noise_rms)
         return obj
 
     def __array_finalize__(self, obj):
-        for k in ("outline_error", "edge_contrast", "accepted", "symmetry_rms"):
+        for k in ("outline_error", "edge_contrast", "accepted", "symmetry_rms", "noise_rms"):
             setattr(self, k, getattr(obj, k, math.nan))
 
     def __reduce__(self):  # pickles (worker processes) keep the attributes

@@ -1215,13 +1215,14 @@ def _finish_all(src: _Image, segs, *, refine, min_area, smooth, border, iteratio
                     q_quality = outline_quality(*again)
                     if q_quality["outline_error"] <= o.recut_gain * quality["outline_error"]:
                         p, quality, hom = again[0], q_quality, again[2]
+        noise = math.nan
         if symmetric:
-            p = _averaged(src, p, hom, o)
-        out.append(ImageOutline(p, **quality))
+            p, noise = _averaged(src, p, hom, o)
+        out.append(ImageOutline(p, **quality, noise_rms=noise))
     return out
 
 
-def _averaged(src: _Image, p: np.ndarray, hom, o) -> np.ndarray:
+def _averaged(src: _Image, p: np.ndarray, hom, o) -> tuple[np.ndarray, float]:
     """The refined outline ``p`` averaged with its mirror image
     (:func:`sorjax._detect.symmetric_average`, weighted by where
     :func:`sorjax._detect.refine_to_edges` confirms the image's edge), or ``p`` as it is
@@ -1230,15 +1231,18 @@ def _averaged(src: _Image, p: np.ndarray, hom, o) -> np.ndarray:
     mirror image would move it) or touches the image border (its mirror image would
     reach past it), and when the average crosses itself (where the mirror partners of
     neighbouring points lie on different parts of a thin or leaking outline;
-    ``random_photo_set(126)`` had one).  Its error attributes stay those of ``p``."""
+    ``random_photo_set(126)`` had one).  Its error attributes stay those of ``p``.
+    Returns ``(outline, noise_rms)``: ``noise_rms`` the symmetry residual of ``p`` (px,
+    ``hom.rms``) when the outline was averaged, the noise that the averaged outline no
+    longer shows (:func:`sorjax.calibrate`'s ``outline_noise``), else NaN."""
     from ._detect import refine_to_edges, symmetric_average, symmetry_limit
     from ._outline import _segments_cross
 
     if hom is None or not float(hom.rms) <= symmetry_limit(p, o) or _border_sides(p, src.shape, margin=1.5):
-        return p
+        return p, math.nan
     _, stats = refine_to_edges((src.f64, src.shape), p, o, keep=True)
     q = symmetric_average(p, hom.W, stats["kept"], o)
-    return p if _segments_cross(q) else q
+    return (p, math.nan) if _segments_cross(q) else (q, float(hom.rms))
 
 
 def outlines_from_image(

@@ -179,11 +179,15 @@ def noise_moments(geo: NoiseGeometry, J: Float[Array, "VN p"], ell_min_px, ell_m
     return ells, searched, m
 
 
-def estimate_noise(geo: NoiseGeometry, r: Float[Array, "V N"], J: Float[Array, "VN p"], ell_min_px, ell_max_px):
+def estimate_noise(geo: NoiseGeometry, r: Float[Array, "V N"], J: Float[Array, "VN p"], ell_min_px, ell_max_px,
+                   rss=None):
     """``(ell, sigma_n^2)`` from the residuals ``r`` at an optimum of a model with
     Jacobian ``J`` (the module's moment matching over :func:`ell_grid`, the moments
     :func:`noise_moments`; ``sigma_n^2`` in ``r``'s units squared, ``ell`` px).
-    Residuals that are all zero give ``sigma_n^2 = 0``."""
+    Residuals that are all zero give ``sigma_n^2 = 0``.  ``rss``: the residual sum of
+    squares the level is matched to, when not ``|r|^2`` (one with per-view noise
+    floors, :func:`sorjax._bundle.floored_rss`); the correlation length is matched to
+    ``r`` alone."""
     ells, searched, m = noise_moments(geo, J, ell_min_px, ell_max_px)
     rr = jnp.sum(r**2)
     emp = jnp.stack([jnp.einsum("vn,vnm,vm->", r, geo.near, r), jnp.einsum("vn,vnm,vm->", r, geo.mirror, r)])
@@ -191,7 +195,7 @@ def estimate_noise(geo: NoiseGeometry, r: Float[Array, "V N"], J: Float[Array, "
     m0, ratios = m[:, 0], m[:, 1:] / jnp.maximum(m[:, 0:1], 1e-300)
     miss = jnp.where(searched, jnp.sum((ratios - emp) ** 2, axis=1), jnp.inf)
     k = jnp.argmin(miss)
-    return ells[k], rr / jnp.maximum(m0[k], 1e-300)
+    return ells[k], (rr if rss is None else rss) / jnp.maximum(m0[k], 1e-300)
 
 
 def knot_spacing_px(field: DistanceField, scale) -> Float[Array, ""]:

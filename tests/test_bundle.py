@@ -124,6 +124,39 @@ def test_padded_chart_equals_the_compact_chart_for_a_known_aspect(scene):
     np.testing.assert_allclose(float(c4[0][0, 0]), float(c4[0][1, 1]), rtol=1e-9)  # fu = fv exactly
 
 
+def test_noise_floor_raises_the_level_only_where_it_binds(scene):
+    """BundleProblem.noise: each view's residual sum of squares counts as at least
+    ``n_j noise_j^2``, in the residual variance and in the covariance's noise level
+    (which scales with it); a floor of zero is no floor; the residuals (the estimate)
+    do not depend on it."""
+    import dataclasses
+
+    from sorjax._bundle import covariance, floored_rss, residual_variance
+
+    outs = [scenes.paper_noise(o, 1.0, 80 + i) for i, o in enumerate(scene.outlines)]
+    prob, (k, a) = problem_at_truth(scene, outs)
+    y = solve((k, a), prob, method="gn")[0]
+    r = residuals(y, prob)
+    rss = np.sum(np.asarray(r).reshape(prob.weights.shape) ** 2, axis=1)
+    n = np.asarray(jnp.sum(prob.weights, axis=1))
+    c0 = covariance(y, prob, jnp.eye(3))
+    V = len(outs)
+    zero = dataclasses.replace(prob, noise=jnp.zeros(V))
+    np.testing.assert_array_equal(np.asarray(covariance(y, zero, jnp.eye(3))[0]), np.asarray(c0[0]))
+    floor = np.zeros(V)
+    floor[0] = 3.0 * np.sqrt(rss[0] / n[0])
+    high = dataclasses.replace(prob, noise=jnp.asarray(floor))
+    np.testing.assert_array_equal(np.asarray(residuals(y, high)), np.asarray(r))
+    want = n[0] * floor[0] ** 2 + rss[1:].sum()
+    np.testing.assert_allclose(float(jax.jit(floored_rss)(r, high)), want, rtol=1e-12)
+    np.testing.assert_allclose(float(residual_variance(r, y, high)) / float(residual_variance(r, y, prob)),
+                               want / rss.sum(), rtol=1e-12)
+    c1 = covariance(y, high, jnp.eye(3))
+    np.testing.assert_allclose(float(c1[1]) / float(c0[1]), want / rss.sum(), rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(c1[0]), np.asarray(c0[0]) * want / rss.sum(), rtol=1e-9)
+    assert float(c1[3]) == float(c0[3])  # the correlation length is the residuals' own
+
+
 def test_make_problem_is_pure_and_masks_views():
     """make_problem keeps nothing between calls (the caller passes a problem on): it is
     a pure function, the same under jit; a masked view keeps its slot with all weights

@@ -52,6 +52,33 @@ def test_noisy_ordering_and_bundle_uncertainty(spheres):
     assert np.all(np.asarray(cal_b.view_rms) < 1.0)
 
 
+@pytest.mark.filterwarnings("ignore:weak geometry")
+def test_outline_noise_is_a_floor_of_the_noise_level_not_of_the_estimate(spheres):
+    """``outline_noise`` (an averaged outline's noise, which its residuals no longer
+    show) raises the noise level the standard deviations and checks are taken at, and
+    only where it exceeds a view's residuals; the estimate does not move.  An
+    ImageOutline's ``noise_rms`` attribute says the same."""
+    from sorjax._detect import ImageOutline
+
+    sc, _ = spheres
+    outs = [scenes.paper_noise(o, 1.0, 10 + i) for i, o in enumerate(sc.outlines)]
+    base = sorjax.calibrate(outs)
+    below = sorjax.calibrate(outs, outline_noise=0.01)  # under every view's residual: no change
+    np.testing.assert_array_equal(np.asarray(below.K), np.asarray(base.K))
+    np.testing.assert_array_equal(below.std, base.std)
+    floor = 4.0 * float(np.max(base.view_rms))
+    high = sorjax.calibrate(outs, outline_noise=[floor] + [float("nan")] * (len(outs) - 1))
+    own = sorjax.calibrate([ImageOutline(outs[0], noise_rms=floor), *outs[1:]])
+    for cal in (high, own):
+        np.testing.assert_allclose(np.asarray(cal.K), np.asarray(base.K), rtol=1e-12)
+        ratio = cal.std / base.std
+        # view 0's residual sum of squares raised 16-fold or more, the others' kept:
+        # about sqrt(18 / 3) = 2.4 for three equal views
+        assert np.all(ratio > 2.0) and np.all(ratio < 4.0), ratio
+        np.testing.assert_allclose(ratio, ratio[0], rtol=1e-9)  # one level for all
+    np.testing.assert_array_equal(own.std, high.std)
+
+
 def test_result_code_when_not_positive_definite(spheres):
     sc, homs = spheres
     # two views only, and one of them mirrored: inconsistent with any real camera
@@ -121,6 +148,9 @@ def test_conic_views_are_dropped_with_a_reason(spheres):
         (dict(image_size=(640,)), r"image_size must be \(width, height\)"),
         (dict(image_size=(640, -480)), "image_size"),
         (dict(image_size=(640.5, 480)), "image_size"),
+        (dict(outline_noise=-1.0), "outline_noise must be a finite number of pixels >= 0"),
+        (dict(outline_noise="0.5"), "outline_noise"),
+        (dict(outline_noise=[0.5, 0.5]), "outline_noise: got 2 values for 3 outlines"),
     ],
 )
 def test_bad_outline_error_and_image_size(spheres, kw, words):

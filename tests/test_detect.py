@@ -454,6 +454,9 @@ def test_image_outlines_are_averaged_with_their_mirror_image():
     bad = S.distance_to_polyline(np.asarray(both[0]), exact) > 0.5
     assert rms_to(np.asarray(both[1])[bad], exact) < 0.8 * rms_to(np.asarray(both[0])[bad], exact)
     assert both[1].outline_error == both[0].outline_error
+    # the residual the averaged outline no longer shows is handed to the calibration as its noise
+    assert math.isnan(both[0].noise_rms) and both[1].noise_rms > 0.5
+    assert float(sorjax.fit_homology(both[1]).rms) < 0.8 * both[1].noise_rms
 
 
 def test_an_average_that_crosses_itself_is_not_taken(monkeypatch):
@@ -464,7 +467,8 @@ def test_an_average_that_crosses_itself_is_not_taken(monkeypatch):
     src = X._as_bgr(np.ascontiguousarray(img))
     p = np.asarray(sorjax.outlines_from_mask(vase.astype(np.float64))[0])
     hom = T.outline_homology(p)
-    assert X._averaged(src, p, hom, T.DetectOptions()) is not p  # averaged (nothing to move, a new array)
+    q, noise = X._averaged(src, p, hom, T.DetectOptions())
+    assert q is not p and noise == float(hom.rms)  # averaged (nothing to move, a new array)
 
     def figure_eight(p, W, confirmed, o):
         q = p.copy()
@@ -473,4 +477,5 @@ def test_an_average_that_crosses_itself_is_not_taken(monkeypatch):
         return q
 
     monkeypatch.setattr(T, "symmetric_average", figure_eight)
-    assert X._averaged(src, p, hom, T.DetectOptions()) is p
+    q, noise = X._averaged(src, p, hom, T.DetectOptions())
+    assert q is p and math.isnan(noise)

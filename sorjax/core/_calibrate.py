@@ -48,7 +48,7 @@ def _intrinsics(K):
 
 
 def calibrate(points: Float[Array, "V M 2"], method: str = "bundle", aspect=jnp.nan, *, options: Options = Options(),
-              image_size=None, valid=None, distortion: str = "none", fixed=None) -> CoreResult:
+              image_size=None, valid=None, distortion: str = "none", fixed=None, noise=None) -> CoreResult:
     """Calibrate from ``V`` outlines of ``M`` evenly spaced pixel points each (e.g.
     :func:`sorjax.make_outline`'s points, positively oriented).
 
@@ -69,10 +69,17 @@ def calibrate(points: Float[Array, "V M 2"], method: str = "bundle", aspect=jnp.
             aspect fv``).  Fewer intrinsics to estimate need fewer views: with the
             principal point fixed and at most two intrinsics free, one view with a
             finite ``v_x`` is enough (:func:`views_needed`).
+        noise: (V,) each outline's noise floor, px RMS along the normal (0 or NaN:
+            none), or None (none).  For outlines whose symmetry residuals understate
+            their noise (averaged with their own mirror image, as
+            :func:`sorjax.outlines_from_image` does): every estimate of the noise level
+            (covariance, model checks, perspective evidence) takes each view's residuals
+            as at least this (:attr:`sorjax._bundle.BundleProblem.noise`); the estimate
+            of ``K`` does not depend on it.
     """
     homs = fit_homologies(points, options)
     return calibrate_homologies(points, homs, method, aspect, options=options, image_size=image_size, valid=valid,
-                                distortion=distortion, fixed=fixed)
+                                distortion=distortion, fixed=fixed, noise=noise)
 
 
 def fit_homologies(points: Float[Array, "V M 2"], options: Options = Options(), sequential: bool | None = None
@@ -105,7 +112,7 @@ class _Common(NamedTuple):
     problem: BundleProblem
 
 
-def _common(points, homs: ViewHomologies, valid, options: Options) -> _Common:
+def _common(points, homs: ViewHomologies, valid, options: Options, noise=None) -> _Common:
     radius = outline_radius(points)
     drop = view_verdicts(homs.rms, homs.rms_untrimmed, radius, homs.is_conic, homs.trimmed, valid, options)
     dup = duplicate_views(points, drop == USED, options)
@@ -120,8 +127,9 @@ def _common(points, homs: ViewHomologies, valid, options: Options) -> _Common:
         all_inf=jnp.all(jnp.where(used, homs.at_infinity, True)), T=T, rms_u=jnp.where(used, homs.rms, jnp.nan),
         points_n=points_n, l_n=homs.l_s @ jnp.linalg.inv(T),  # lines map by T^-T
         inliers=inliers,
-        # the joint fields, samples and weights: built once, shared by every method
-        problem=make_problem(points_n, options.n_samples, None, inliers, used),
+        # the joint fields, samples, weights and noise floors: built once, shared by every method
+        problem=make_problem(points_n, options.n_samples, None, inliers, used,
+                             noise=None if noise is None else noise * T[0, 0]),
     )
 
 
@@ -152,7 +160,7 @@ def _distorted(c: _Common, homs: ViewHomologies, aspect, options: Options, disto
     outlines cannot tell which is right) and ``k`` NaN (not determined)."""
     seeds, seed_ok = bundle_seeds(homs.v_x, homs.l_s, c.used, c.T, aspect, fixed)
     d = bundle_estimate_distorted(c.points_n, c.used, c.inliers, c.l_n, seeds, seed_ok, aspect, c.T, options,
-                                  distortion, fixed)
+                                  distortion, fixed, base=c.problem)
     fit, free = d.fit, d.free
     gate, g, z = distortion_gate(d.delta, fit.n, jnp.sqrt(fit.s2), options)
     gate = gate & d.ok
@@ -220,16 +228,19 @@ def views_needed(aspect, fixed=None):
     return jnp.where(pp_fixed & (n_free_intrinsics(aspect, fixed) <= 2), 1, 2)
 
 
-def _check(points, valid, image_size, aspect):
+def _check(points, valid, image_size, aspect, noise=None):
     points = jnp.asarray(points, jnp.float64)
     valid = jnp.ones(points.shape[0], bool) if valid is None else jnp.asarray(valid, bool)
     image_size = _nan(2) if image_size is None else jnp.asarray(image_size, jnp.float64)
-    return points, valid, image_size, jnp.asarray(aspect, jnp.float64)
+    if noise is not None:  # (V,) px; NaN or negative: no floor
+        noise = jnp.broadcast_to(jnp.asarray(noise, jnp.float64), points.shape[:1])
+        noise = jnp.where(noise > 0, noise, 0.0)
+    return points, valid, image_size, jnp.asarray(aspect, jnp.float64), noise
 
 
 def calibrate_homologies(points: Float[Array, "V M 2"], homs: ViewHomologies, method: str = "bundle", aspect=jnp.nan,
                          *, options: Options = Options(), image_size=None, valid=None,
-                         distortion: str = "none", fixed=None) -> CoreResult:
+                         distortion: str = "none", fixed=None, noise=None) -> CoreResult:
     """:func:`calibrate` from per-view homologies already fitted (pixels)."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}; got {method!r}")
@@ -240,8 +251,8 @@ def calibrate_homologies(points: Float[Array, "V M 2"], homs: ViewHomologies, me
     if fixed is not None and method != "bundle":
         raise ValueError(f"fixed intrinsics are held by the bundle only; got method={method!r}")
     fixed = _check_fixed(fixed)
-    points, valid, image_size, aspect = _check(points, valid, image_size, aspect)
-    c = _common(points, homs, valid, options)
+    points, valid, image_size, aspect, noise = _check(points, valid, image_size, aspect, noise)
+    c = _common(points, homs, valid, options, noise)
     if distortion != "none":
         out, dist = _distorted(c, homs, aspect, options, distortion, fixed)
         return _finish(points, homs, c, method, aspect, image_size, options, bundle=(out, None), distortion=dist,
@@ -257,20 +268,20 @@ def calibrate_homologies(points: Float[Array, "V M 2"], homs: ViewHomologies, me
 
 def calibrate_methods(points: Float[Array, "V M 2"], homs: ViewHomologies, methods: tuple[str, ...], aspects,
                       *, options: Options = Options(), image_size=None, valid=None,
-                      fixed=None) -> tuple[CoreResult, ...]:
+                      fixed=None, noise=None) -> tuple[CoreResult, ...]:
     """:func:`calibrate_homologies` for several ``methods`` (static tuple) with their
     ``aspects`` (one each, NaN: free) at once, as an experiment comparing estimators
     runs them: the bundles of every aspect model share one traced solver
     (``jax.lax.map`` over the aspects), and so do the linear methods' covariances.
     The same numbers as separate calls, a fraction of the compilation.  ``fixed``
     (intrinsics held fixed, px; None: none) applies to the bundle only: the linear
-    methods' results ignore it."""
+    methods' results ignore it; ``noise`` as :func:`calibrate`'s."""
     for m in methods:
         if m not in METHODS:
             raise ValueError(f"method must be one of {METHODS}; got {m!r}")
-    points, valid, image_size, _ = _check(points, valid, image_size, jnp.nan)
+    points, valid, image_size, _, noise = _check(points, valid, image_size, jnp.nan, noise)
     aspects = jnp.asarray(aspects, jnp.float64).reshape(len(methods))
-    c = _common(points, homs, valid, options)
+    c = _common(points, homs, valid, options, noise)
     ib = [i for i, m in enumerate(methods) if m == "bundle"]
     il = [i for i, m in enumerate(methods) if m != "bundle"]
     fixed = _check_fixed(fixed)
@@ -395,7 +406,9 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
     else:
         K, omega, ok, cov_unit = linear
         cov = _nan((4, 4))
-        s_px = jnp.sqrt(jnp.sum(jnp.where(used, homs.rms, 0.0) ** 2) / jnp.maximum(n_used, 1))
+        floor = c.problem.noise
+        rms = homs.rms if floor is None else jnp.maximum(homs.rms, floor / c.T[0, 0])  # (the floors in px)
+        s_px = jnp.sqrt(jnp.sum(jnp.where(used, rms, 0.0) ** 2) / jnp.maximum(n_used, 1))
         finite = jnp.all(jnp.isfinite(K))
         persp_ok, g_px, z = jnp.asarray(True), jnp.asarray(jnp.nan), jnp.asarray(jnp.nan)
         cost, view_rms, steps, vx, ls = jnp.asarray(jnp.nan), rms_u, jnp.asarray(0, jnp.int32), homs.v_x, homs.l_s

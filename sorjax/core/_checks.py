@@ -52,14 +52,16 @@ at the edge (:mod:`sorjax._calibration`).
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jax.scipy.special import gammaincc
 from jaxtyping import Array, Bool, Float, Int
 
-from .._bundle import (BundleProblem, fixed_chart, foot_parameters, free_intrinsics, make_problem, noise_blocks,
-                       pin_intrinsics, pixel_params, pole_polar_pairs, problem_normals, project_out,
+from .._bundle import (BundleProblem, fixed_chart, floored_rss, foot_parameters, free_intrinsics, make_problem,
+                       noise_blocks, pin_intrinsics, pixel_params, pole_polar_pairs, problem_normals, project_out,
                        residual_jacobian, residual_variance, with_model)
 from .._homology import symmetry_residuals
 from .._noise import jacobian_and_normal_sensitivity, noise_meat
@@ -204,7 +206,7 @@ def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=N
     J, r, a_nu = jax.vmap(one)(v, l, problem.samples, problem.fields, problem.weights, feet, problem_normals(problem))
     n = jnp.sum(problem.weights, axis=1)
     n_par = jnp.sum(used) * 2 + n_free_intrinsics(aspect, fixed)
-    s2 = jnp.sum(r**2) / jnp.maximum(jnp.sum(n) - n_par, 1.0)
+    s2 = floored_rss(r, problem) / jnp.maximum(jnp.sum(n) - n_par, 1.0)
     # the block-diagonal Jacobian of all views' releases, (V N, 4 V), for the meat
     G = (J[:, :, None, :] * jnp.eye(V)[:, None, :, None]).reshape(V * N, V * 4)
     meat = noise_meat(G, noise_blocks(problem, feet, T, ell, s2, a_nu))
@@ -348,7 +350,7 @@ def lens_release(y, points_n, used, inliers, aspect, T, options: Options, fixed=
     fixed_n = None if fixed is None else fixed_chart(fixed, T)
     pinhole = (make_problem(points_n, options.n_samples, aspect, inliers, used, fixed_n) if base is None
                else with_model(base, aspect, fixed_n))
-    problem = BundleProblem(pinhole.fields, pinhole.samples, pinhole.weights, pinhole.aspect, 1, pinhole.fixed)
+    problem = dataclasses.replace(pinhole, n_dist=1)
     k = jnp.concatenate([y[0], jnp.zeros(1)])
     return release_score((k, y[1]), problem, jnp.arange(5) == 4, T, options, ell)
 

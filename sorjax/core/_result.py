@@ -75,7 +75,7 @@ class CoreResult(eqx.Module):
         weak: relative std of the focal length when the geometry is weak, else NaN.
         aspect_weak: with a free aspect ratio, fu / fv is poorly determined.
         cost: eq. 20's cost summed over the used views at the estimate, px^2 (bundle).
-        s_px: residual standard error, px.
+        s_px: residual standard error, px (each view's residuals counted as at least its noise floor, ``noise``).
         steps: optimiser steps of the bundle (0 for the linear methods).
         used: (V,) views used; ``drop_reason`` (V,) why the others were not
             (:data:`sorjax.core._assess.DROP_REASONS`).
