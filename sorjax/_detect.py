@@ -82,11 +82,13 @@ confirmed).
 Symmetric averaging (:func:`symmetric_average`)
 -----------------------------------------------
 A refined outline and its own mirror image under its fitted homology are two estimates of
-one curve.  Where they disagree by more than ``average_px`` (a bite or bump on one side),
-the outline moves towards their average, weighted by where the image confirms the edge
-(``unconfirmed_weight`` where it does not); nearer, each side keeps its own error, which
-the calibration's symmetry residuals measure.  The error attributes are those of the
-outline before the averaging.
+one curve.  The outline moves to their average, weighted by where the image confirms the
+edge (``unconfirmed_weight`` where it does not): a bite or bump on one side takes the
+mirror image of the other, and the two sides' independent errors are averaged (where they
+disagree by more than ``average_px``; 0 by default: everywhere).  The error attributes are
+those of the outline before the averaging, and ``noise_rms`` its symmetry residual then:
+the noise the averaged outline no longer shows, which the calibration takes as the view's
+noise floor.
 """
 
 from __future__ import annotations
@@ -174,12 +176,13 @@ class DetectOptions:
     # 100-129 (161 outlines; median RMS 0.378 px with 0.05 and no smoothing, 0.363 px with these)
     unconfirmed_weight: float = 0.2
     weight_sigma: float = 2.0
-    # ... taken only where a point and its mirror partner disagree: none of it within average_px of
-    # each other, all of it beyond twice that (a ramp between, smoothed as the weights).  Nearer, each
-    # point keeps its own error, which the calibration's symmetry residuals measure: averaged
-    # everywhere, the residuals vanish and the calibration's noise model with them (random_photo_set
-    # seed 122: its one camera calibrated from automatic outlines refused as inconsistent)
-    average_px: float = 1.0
+    # ... taken where a point and its mirror partner disagree by more than average_px (all of it beyond
+    # twice that, a ramp between, smoothed as the weights); 0 (default): everywhere.  The residuals an
+    # outline averaged everywhere no longer shows go to the calibration as its noise floor
+    # (ImageOutline.noise_rms); without that floor, random_photo_set seed 122's camera was refused as
+    # inconsistent (0.099 px of residual taken for the whole noise), with it calibrated within 0.1 %
+    # (session 24).  1 px averages only the defects (median RMS 0.43 px against 0.36 px)
+    average_px: float = 0.0
 
 
 class ImageOutline(np.ndarray):
@@ -820,21 +823,23 @@ def symmetric_average(p: np.ndarray, W, confirmed: np.ndarray, o: DetectOptions)
     partner (interpolated along its segment of ``W(p)``).  Each point moves a share
     ``s_i`` of the way there, ``q_i = p_i + s_i (a_i - p_i)``, with ``s_i`` 0 where
     ``|f_i - p_i| <= average_px``, 1 beyond twice that, linear between (smoothed as the
-    weights); ``average_px = 0`` averages every point.  A bite or bump on one side is
-    thus replaced by the mirror image of the other side where the other side's edge is
-    confirmed and its own is not, and halved where both or neither are; the small
-    disagreements of the two sides' independent errors are left, because the
-    calibration measures the outlines' noise by them (:func:`sorjax.calibrate`'s
-    symmetry residuals: averaged away, the noise model goes with them).  A defect that
-    is symmetric itself (a contact shadow centred on the axis, a whole outline off by a
-    constant) is not seen, and symmetry cannot tell a leak on one side from a bite on
-    the other: the image's edge decides, where it can.
+    weights); ``average_px = 0`` (the default) averages every point.  A bite or bump on
+    one side is thus replaced by the mirror image of the other side where the other
+    side's edge is confirmed and its own is not, and halved where both or neither are;
+    the two sides' independent errors are averaged (divided by about sqrt 2).  The
+    averaged outline is symmetric by construction: the calibration, which measures the
+    outlines' noise by their symmetry residuals, must be told the noise it no longer
+    shows (``outlines_from_image`` hands the residual before the averaging on as
+    ``ImageOutline.noise_rms``, :func:`sorjax.calibrate`'s ``outline_noise``).  A
+    defect that is symmetric itself (a contact shadow centred on the axis, a whole
+    outline off by a constant) is not seen, and symmetry cannot tell a leak on one side
+    from a bite on the other: the image's edge decides, where it can.
 
     On the photo-like renders (:func:`sorjax.render.random_photo_set` seeds 100-129, one
     camera of 4 images each, the 161 outlines found and matched to an unoccluded object;
     the options were chosen on them) the median RMS distance to the exact silhouette went
-    from 0.51 px to 0.43 px (0.40 px with ``average_px`` 0.5, 0.36 px with 0), the share
-    within 1 px from 75 to 78 % (80 %)."""
+    from 0.51 px to 0.36 px (0.40 px with ``average_px`` 0.5, 0.43 px with 1), the share
+    within 1 px from 75 to 80 % (78 % with 1)."""
     from ._extract import _periodic_gauss
     from ._homology import transfer
     from .scenes import closest_points_on_polyline
