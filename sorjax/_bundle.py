@@ -93,14 +93,18 @@ class BundleProblem(eqx.Module):
     :func:`covariance`'s pseudo-inverse leave them alone; :func:`n_params` does not
     count them).
 
-    ``noise`` (V,): each view's outline noise floor (normalised units, RMS along the
-    normal; 0: none), or None (none, the program traced before floors existed).  An
-    outline that was made more symmetric than it was measured (averaged with its own
-    mirror image, :func:`sorjax._detect.symmetric_average`) no longer shows its noise
-    in its residuals; every estimate of the noise level (:func:`floored_rss`) then takes
-    a view's residual sum of squares as at least ``n_j noise_j^2`` (``n_j`` its samples
-    counted), so that the covariance and the model checks are not told that the views
-    are noise-free.  The estimate itself does not depend on it."""
+    ``noise`` (V,): each view's outline noise floor (normalised units: the RMS symmetry
+    residual the outline would show, the residuals' own units; 0: none), or None (none,
+    the program traced before floors existed).  An outline that was made more symmetric
+    than it was measured (averaged with its own mirror image,
+    :func:`sorjax._detect.symmetric_average`) no longer shows its noise in its
+    residuals; every estimate of the noise level (:func:`floored_rss`) then takes a
+    view's residual sum of squares as at least ``n_j noise_j^2`` (``n_j`` its samples
+    counted), so that the covariance, the model checks and the solver's stopping test
+    (:func:`step_sigmas`) are not told that the views are noise-free.  The cost does
+    not depend on it.  The noise's correlation length is still read off the residuals,
+    and its level is one for all views (:func:`noise_blocks`): a floor on one view
+    raises the level the others are judged at too."""
 
     fields: DistanceField
     samples: Float[Array, "V N 2"]
@@ -511,7 +515,8 @@ def project_out(A, B):
 def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Options()):
     """Covariance of the pixel intrinsics ``(fu, fv, u0, v0)`` at ``y`` (followed by
     ``(k1[, k2])`` with distortion, :func:`pixel_params`); returns
-    ``(cov, s2, step, ell)`` with ``s2 = |r|^2 / (VN - p)`` (normalised units^2),
+    ``(cov, s2, step, ell)`` with ``s2 = |r|^2 / (VN - p)`` (normalised units^2;
+    each view's share at least its noise floor, :func:`floored_rss`),
     ``step`` the Gauss-Newton step's Mahalanobis length (:func:`step_sigmas`) and
     ``ell`` the outline noise's correlation length (px, :mod:`sorjax._noise`).
 
@@ -841,7 +846,8 @@ STATIONARY_SIGMAS = 0.01
 
 def step_sigmas(y, problem: BundleProblem):
     """Mahalanobis length of the Gauss-Newton step at ``y``:
-    ``sqrt(r^T J (J^T J)^+ J^T r) / s`` with ``s^2 = |r|^2 / (n - p)``."""
+    ``sqrt(r^T J (J^T J)^+ J^T r) / s`` with ``s^2 = |r|^2 / (n - p)``
+    (:func:`residual_variance`, the views' noise floors included)."""
     J, r, _ = residual_jacobian(y, problem)
     return _step_length(J, r, residual_variance(r, y, problem))
 

@@ -924,7 +924,7 @@ def _outline_noise(outline_noise, outlines, n: int):
     if vals.ndim != 1 or not all(_is_number(v) and (math.isnan(v) or (math.isfinite(v) and v >= 0)) for v in vals):
         raise ValueError(bad)
     vals = np.nan_to_num(vals.astype(np.float64), nan=0.0)
-    if vals.size == 1:
+    if np.ndim(outline_noise) == 0:
         return np.full(n, vals[0])
     if vals.size != n:
         raise ValueError(f"outline_noise: got {vals.size} values for {n} outlines; give one number (px) per outline, "
@@ -1065,15 +1065,19 @@ def calibrate(
             bundle only.  Two views are still needed unless the principal point is
             fixed too (one view puts the principal point at either of two places).
             Fixed intrinsics have a standard deviation of 0.
-        outline_noise: each outline's noise (px RMS along the normal) when its
-            symmetry residual understates it: one number, one per outline (NaN: none),
+        outline_noise: each outline's noise, px: the RMS symmetry residual it would
+            show (``Calibration.view_rms``' units), when its residual understates it
+            (the outline was processed to look more symmetric than it was measured):
+            one number, one per outline (NaN: none),
             or None (default: the ``noise_rms`` attribute of outline arrays that carry
             one, as :func:`sorjax.outlines_from_image`'s do, else none).  An outline
             averaged with its own mirror image (:func:`sorjax.outlines_from_image`
             does so where its two sides disagree) fits its homology better than it
             was measured; the calibration's noise level (covariance, model checks,
-            perspective evidence) then takes each view's residuals as at least this
-            (:attr:`sorjax._bundle.BundleProblem.noise`).  ``K`` does not depend on it.
+            perspective evidence, whether a view's ``v_x`` is at infinity) then takes
+            each view's residuals as at least this
+            (:attr:`sorjax._bundle.BundleProblem.noise`); the cost, and so ``K``, is
+            the same.
         throw: raise :class:`CalibrationError` instead of returning a failed result.
 
     Returns:

@@ -168,6 +168,34 @@ def test_mirror_view_has_vertex_at_infinity(batch):
     assert not bool(_get(homs, rows["sor 1.0"][0]).at_infinity)
 
 
+def test_noise_floor_scales_the_infinity_z_and_decides_the_flags_again(batch):
+    """with_noise_floor: a view's v_3 standard error grows with the noise level, so its
+    infinity_z falls by rms / noise where the floor is higher (an averaged outline's
+    v_x must not pass as finite on residuals it no longer shows); the conic test is
+    taken at the floored residual; a floor at or below the residual changes nothing."""
+    from sorjax.core import with_noise_floor
+
+    rows, _, _, homs = batch
+    V = homs.rms.shape[0]
+    same = with_noise_floor(homs, 0.5 * np.asarray(homs.rms), OPTIONS)
+    for a, b in zip(jax.tree_util.tree_leaves(same), jax.tree_util.tree_leaves(homs)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    i = rows["noisy sor 0"][0]
+    h = _get(homs, i)
+    assert not bool(h.at_infinity) and np.isfinite(float(h.infinity_z)) and not bool(h.is_conic)
+    floor = np.zeros(V)
+    floor[i] = float(h.rms) * float(h.infinity_z) / (0.5 * OPTIONS.infinity_z)  # z falls to half the threshold
+    got = jax.jit(with_noise_floor)(homs, floor, OPTIONS)
+    np.testing.assert_allclose(float(got.infinity_z[i]), 0.5 * OPTIONS.infinity_z, rtol=1e-12)
+    assert bool(got.at_infinity[i]) and float(got.rms[i]) == float(h.rms)
+    # the conic test at the floored residual: a conic fits within conic_ratio times a noise this high
+    floor[i] = 2.0 * float(h.conic_rms) / OPTIONS.conic_ratio
+    assert bool(with_noise_floor(homs, floor, OPTIONS).is_conic[i])
+    others = np.arange(V) != i
+    np.testing.assert_array_equal(np.asarray(got.infinity_z)[others], np.asarray(homs.infinity_z)[others])
+    np.testing.assert_array_equal(np.asarray(got.at_infinity)[others], np.asarray(homs.at_infinity)[others])
+
+
 def test_init_replaces_the_automatic_starts(batch):
     rows, views, fits, _ = batch
     i = rows["noisy sor 0"][0]

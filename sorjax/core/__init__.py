@@ -21,3 +21,4 @@ from ._shard import TrialSharder as TrialSharder, compile_together as compile_to
 from ._shard import host_threads as host_threads, sharded_vmap as sharded_vmap
 from ._viewfit import ViewFit as ViewFit, ViewHomologies as ViewHomologies, fit_view as fit_view
 from ._viewfit import fit_views as fit_views, homologies_in_pixels as homologies_in_pixels
+from ._viewfit import with_noise_floor as with_noise_floor

@@ -33,7 +33,7 @@ from ._checks import (CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, CULPRIT_VIEWS
 from ._options import Options
 from ._prepare import joint_transform, prepare_views
 from ._result import RESULTS, CoreResult
-from ._viewfit import ViewHomologies, fit_views, homologies_in_pixels
+from ._viewfit import ViewHomologies, fit_views, homologies_in_pixels, with_noise_floor
 
 METHODS = ("bundle", "I", "IIa", "IIb")
 
@@ -69,13 +69,15 @@ def calibrate(points: Float[Array, "V M 2"], method: str = "bundle", aspect=jnp.
             aspect fv``).  Fewer intrinsics to estimate need fewer views: with the
             principal point fixed and at most two intrinsics free, one view with a
             finite ``v_x`` is enough (:func:`views_needed`).
-        noise: (V,) each outline's noise floor, px RMS along the normal (0 or NaN:
-            none), or None (none).  For outlines whose symmetry residuals understate
-            their noise (averaged with their own mirror image, as
-            :func:`sorjax.outlines_from_image` does): every estimate of the noise level
-            (covariance, model checks, perspective evidence) takes each view's residuals
-            as at least this (:attr:`sorjax._bundle.BundleProblem.noise`); the estimate
-            of ``K`` does not depend on it.
+        noise: (V,) each outline's noise floor, px: the RMS symmetry residual it would
+            show (as ``ViewHomologies.rms``; 0 or NaN: none), or None (none).  For
+            outlines whose symmetry residuals understate their noise (averaged with
+            their own mirror image, as :func:`sorjax.outlines_from_image` does): every
+            estimate of the noise level (covariance, model checks, perspective and
+            distortion evidence, the solver's stopping test, whether a view's ``v_x``
+            is at infinity: :func:`sorjax.core.with_noise_floor`) takes each view's
+            residuals as at least this (:attr:`sorjax._bundle.BundleProblem.noise`);
+            the cost, and so the estimate of ``K``, is the same.
     """
     homs = fit_homologies(points, options)
     return calibrate_homologies(points, homs, method, aspect, options=options, image_size=image_size, valid=valid,
@@ -252,6 +254,7 @@ def calibrate_homologies(points: Float[Array, "V M 2"], homs: ViewHomologies, me
         raise ValueError(f"fixed intrinsics are held by the bundle only; got method={method!r}")
     fixed = _check_fixed(fixed)
     points, valid, image_size, aspect, noise = _check(points, valid, image_size, aspect, noise)
+    homs = homs if noise is None else with_noise_floor(homs, noise, options)
     c = _common(points, homs, valid, options, noise)
     if distortion != "none":
         out, dist = _distorted(c, homs, aspect, options, distortion, fixed)
@@ -280,6 +283,7 @@ def calibrate_methods(points: Float[Array, "V M 2"], homs: ViewHomologies, metho
         if m not in METHODS:
             raise ValueError(f"method must be one of {METHODS}; got {m!r}")
     points, valid, image_size, _, noise = _check(points, valid, image_size, jnp.nan, noise)
+    homs = homs if noise is None else with_noise_floor(homs, noise, options)
     aspects = jnp.asarray(aspects, jnp.float64).reshape(len(methods))
     c = _common(points, homs, valid, options, noise)
     ib = [i for i, m in enumerate(methods) if m == "bundle"]

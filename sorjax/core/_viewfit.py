@@ -572,10 +572,34 @@ def pixel_homology(fit: ViewFit, T: Float[Array, "3 3"], options: Options = Opti
         v_x=v, l_s=l, W=W, rms=rms, cost=cost,
         rms_untrimmed=jnp.sqrt(fit.cost_untrimmed / jnp.maximum(fit.n_untrimmed, 1.0)) * scale,
         conic_rms=conic, trimmed=jnp.mean((~fit.inliers).astype(jnp.float64)), infinity_z=fit.infinity_z,
-        at_infinity=(jnp.abs(v[2]) < 1e-9) | (fit.infinity_z < options.infinity_z),
-        is_conic=conic <= options.conic_ratio * rms + options.conic_floor_px,
+        at_infinity=_at_infinity(v, fit.infinity_z, options), is_conic=_is_conic(conic, rms, options),
         converged=fit.converged, steps=fit.steps, inliers=fit.inliers,
     )
+
+
+def _at_infinity(v, z, options: Options):
+    return (jnp.abs(v[..., 2]) < 1e-9) | (z < options.infinity_z)
+
+
+def _is_conic(conic_rms, rms, options: Options):
+    return conic_rms <= options.conic_ratio * rms + options.conic_floor_px
+
+
+def with_noise_floor(homs: ViewHomologies, noise, options: Options = Options()) -> ViewHomologies:
+    """``homs`` (stacked, pixels) with the verdicts that take the noise from a view's
+    own residuals taken at a noise of at least ``noise`` (V,) px (a symmetry residual
+    RMS, as ``rms``; 0: none): ``infinity_z`` scaled by ``rms / noise`` where the floor
+    is higher (the standard error of ``v_3`` grows with the noise level), and
+    ``at_infinity`` and ``is_conic`` decided again from it.  For outlines averaged with
+    their own mirror image, whose residuals no longer show their noise
+    (:attr:`sorjax._bundle.BundleProblem.noise`): their ``v_x`` would otherwise pass as
+    finite far too easily.  ``rms`` itself is left as fitted."""
+    noise = jnp.asarray(noise, jnp.float64)
+    higher = noise > homs.rms
+    z = homs.infinity_z * jnp.where(higher, homs.rms / jnp.where(higher, noise, 1.0), 1.0)
+    return eqx.tree_at(lambda h: (h.infinity_z, h.at_infinity, h.is_conic), homs,
+                       (z, _at_infinity(homs.v_x, z, options),
+                        _is_conic(homs.conic_rms, jnp.maximum(homs.rms, noise), options)))
 
 
 def homologies_in_pixels(views: Views, fits: ViewFit, options: Options = Options()) -> ViewHomologies:
