@@ -199,9 +199,10 @@ class ImageOutline(np.ndarray):
     accepted : float
         Fraction of the outline's points whose edge was confirmed on the image.
     symmetry_rms : float
-        RMS symmetry residual (px) of the harmonic homology fitted to the
-        segmentation's outline when the object was found automatically (NaN with a
-        box).
+        RMS symmetry residual (px) of the robust harmonic homology fitted to the
+        refined outline, before it was averaged with its mirror image (without
+        refinement: to the segmentation's outline when the object was found
+        automatically, NaN with a box).
     noise_rms : float
         RMS symmetry residual (px) of the refined outline before it was averaged with
         its own mirror image (:func:`symmetric_average`; NaN when it was not): the
