@@ -944,12 +944,14 @@ def _own_errors(outlines):
 
 
 def measured_outline_error(homs: ViewHomologies, points, per_outline=None, *, floor: float = OUTLINE_ERROR_PX,
-                           options: Options = Options(), left_out: Sequence[int] = ()) -> tuple[float, str]:
+                           options: Options = Options(), left_out: Sequence[int] = (),
+                           noise=None) -> tuple[float, str]:
     """The outline error (px) measured from the outlines, and a note saying so.
 
     Each view's error is its symmetry residual, the RMS residual of its homology fit
     (eq. 20, px; ``homs.rms``), or the outline's own error estimate ``per_outline[i]``
-    (px, e.g. an extractor's; NaN: none) when larger; the measured error is their RMS
+    (px, e.g. an extractor's; NaN: none) or its noise floor ``noise[i]`` (px, the residual
+    it would show, :func:`calibrate`'s ``outline_noise``) when larger; the measured error is their RMS
     over the views the calibration keeps (:func:`sorjax.core._assess.view_verdicts`: not a
     conic, not asymmetric, not over-trimmed, not in ``left_out``), and at least ``floor``.  A residual
     shows only the outline errors that break the symmetry; a segmentation that leaks
@@ -963,6 +965,8 @@ def measured_outline_error(homs: ViewHomologies, points, per_outline=None, *, fl
                                     jnp.asarray(homs.is_conic), jnp.asarray(homs.trimmed),
                                     jnp.asarray(valid), options)) == USED
     rms = np.asarray(homs.rms, np.float64)
+    if noise is not None:  # an averaged outline: the residual it would show
+        rms = np.fmax(rms, np.asarray(noise, np.float64))
     err = rms if per_outline is None else np.fmax(rms, np.asarray(per_outline, np.float64))
     ok = keep & np.isfinite(err)
     value = float(np.sqrt(np.mean(err[ok] ** 2))) if ok.any() else 0.0
@@ -1179,7 +1183,7 @@ def calibrate(
     floor_px = float(outline_error)
     if measure:
         outline_error, note = measured_outline_error(homs, points, per_outline, floor=floor_px,
-                                                     options=Options(n_samples=n_samples))
+                                                     options=Options(n_samples=n_samples), noise=noise)
         floor_note.append(note)
         measured_at = len(floor_note) - 1
     options = Options(n_samples=n_samples, outline_error_px=float(outline_error))
@@ -1204,7 +1208,8 @@ def calibrate(
         floor_note.append(_left_out_text(r, j, share))
         left_out[j] = f"inconsistent with the other views ({100 * share:.0f} % of the consistency score)"
         outline_error, note = measured_outline_error(homs, points, per_outline, floor=floor_px,
-                                                     options=Options(n_samples=n_samples), left_out=list(left_out))
+                                                     options=Options(n_samples=n_samples), left_out=list(left_out),
+                                                     noise=noise)
         floor_note[measured_at] = note
         options = Options(n_samples=n_samples, outline_error_px=float(outline_error))
         r = run(options, size, distortion, fixed, leave_out=list(left_out))

@@ -77,6 +77,10 @@ def test_outline_noise_is_a_floor_of_the_noise_level_not_of_the_estimate(spheres
         assert np.all(ratio > 2.0) and np.all(ratio < 4.0), ratio
         np.testing.assert_allclose(ratio, ratio[0], rtol=1e-9)  # one level for all
     np.testing.assert_array_equal(own.std, high.std)
+    # with the outline error measured from the outlines, a floor counts as the residual
+    # the outline would show
+    measured = sorjax.calibrate(outs, outline_error="measured", outline_noise=2.0)
+    np.testing.assert_allclose(measured.outline_error, 2.0, rtol=1e-12)
 
 
 def test_result_code_when_not_positive_definite(spheres):
