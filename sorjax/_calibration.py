@@ -1075,8 +1075,8 @@ def calibrate(
             one number, one per outline (NaN: none),
             or None (default: the ``noise_rms`` attribute of outline arrays that carry
             one, as :func:`sorjax.outlines_from_image`'s do, else none).  An outline
-            averaged with its own mirror image (:func:`sorjax.outlines_from_image`
-            does so where its two sides disagree) fits its homology better than it
+            averaged with its own mirror image (as :func:`sorjax.outlines_from_image`'s
+            are) fits its homology better than it
             was measured; the calibration's noise level (covariance, model checks,
             perspective evidence, whether a view's ``v_x`` is at infinity) then takes
             each view's residuals as at least this

@@ -81,6 +81,12 @@ def test_outline_noise_is_a_floor_of_the_noise_level_not_of_the_estimate(spheres
     # the outline would show
     measured = sorjax.calibrate(outs, outline_error="measured", outline_noise=2.0)
     np.testing.assert_allclose(measured.outline_error, 2.0, rtol=1e-12)
+    # the core: a floor per outline or one number, nothing else
+    from sorjax import core
+
+    pts = np.stack([np.asarray(sorjax.make_outline(o).points) for o in outs])
+    with pytest.raises(ValueError, match="noise must be one floor"):
+        core.calibrate_homologies(pts, None, noise=np.ones(len(outs) + 1))
 
 
 def test_result_code_when_not_positive_definite(spheres):

@@ -191,6 +191,13 @@ def test_noise_floor_scales_the_infinity_z_and_decides_the_flags_again(batch):
     # the conic test at the floored residual: a conic fits within conic_ratio times a noise this high
     floor[i] = 2.0 * float(h.conic_rms) / OPTIONS.conic_ratio
     assert bool(with_noise_floor(homs, floor, OPTIONS).is_conic[i])
+    # under jax.vmap over a batch of floors: each as one call
+    floors = np.stack([np.zeros(V), floor])
+    batched = jax.vmap(lambda f: with_noise_floor(homs, f, OPTIONS))(jnp.asarray(floors))
+    for k in range(2):
+        one = with_noise_floor(homs, floors[k], OPTIONS)
+        np.testing.assert_array_equal(np.asarray(batched.infinity_z[k]), np.asarray(one.infinity_z))
+        np.testing.assert_array_equal(np.asarray(batched.at_infinity[k]), np.asarray(one.at_infinity))
     others = np.arange(V) != i
     np.testing.assert_array_equal(np.asarray(got.infinity_z)[others], np.asarray(homs.infinity_z)[others])
     np.testing.assert_array_equal(np.asarray(got.at_infinity)[others], np.asarray(homs.at_infinity)[others])

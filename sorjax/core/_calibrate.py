@@ -235,7 +235,11 @@ def _check(points, valid, image_size, aspect, noise=None):
     valid = jnp.ones(points.shape[0], bool) if valid is None else jnp.asarray(valid, bool)
     image_size = _nan(2) if image_size is None else jnp.asarray(image_size, jnp.float64)
     if noise is not None:  # (V,) px; NaN or negative: no floor
-        noise = jnp.broadcast_to(jnp.asarray(noise, jnp.float64), points.shape[:1])
+        noise = jnp.asarray(noise, jnp.float64)
+        if noise.ndim > 1 or (noise.ndim == 1 and noise.shape[0] != points.shape[0]):
+            raise ValueError(f"noise must be one floor (px) per outline, shape ({points.shape[0]},), or one number; "
+                             f"got shape {noise.shape}")
+        noise = jnp.broadcast_to(noise, points.shape[:1])
         noise = jnp.where(noise > 0, noise, 0.0)
     return points, valid, image_size, jnp.asarray(aspect, jnp.float64), noise
 
