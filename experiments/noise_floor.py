@@ -11,7 +11,11 @@ them three ways with the bundle (``outline_error=0``, as a synthetic study):
   the residuals no longer show the noise;
 * ``averaged + floor``: the same outlines with each one's symmetry residual before the
   averaging as its noise floor (``calibrate(outline_noise=...)``, what
-  ``ImageOutline.noise_rms`` carries).
+  ``ImageOutline.noise_rms`` carries), the noise's correlation length read off the
+  averaged outlines' residuals (as in session 24);
+* ``averaged + floor + ell``: the same with the correlation length of the noise before
+  the averaging as well (``calibrate(outline_noise_ell=...)``, what
+  ``ImageOutline.noise_ell`` carries).
 
 It prints, per way, the cameras calibrated, the RMS focal error, the median reported
 std and the RMS of ``z = error / std`` per intrinsic (1 when the std is right, below 1
@@ -33,11 +37,11 @@ from sorjax import scenes
 from sorjax._detect import DetectOptions, outline_homology, symmetric_average
 
 
-def averaged(outline: np.ndarray, o: DetectOptions = DetectOptions()) -> tuple[np.ndarray, float]:
-    """``outline`` averaged with its mirror image (all points confirmed) and its
-    symmetry residual before the averaging (px)."""
+def averaged(outline: np.ndarray, o: DetectOptions = DetectOptions()) -> tuple[np.ndarray, float, float]:
+    """``outline`` averaged with its mirror image (all points confirmed), its symmetry
+    residual before the averaging and that noise's correlation length (px)."""
     h = outline_homology(outline)
-    return symmetric_average(outline, h.W, np.ones(len(outline), bool), o), float(h.rms)
+    return symmetric_average(outline, h.W, np.ones(len(outline), bool), o), float(h.rms), float(h.noise_ell)
 
 
 def main(argv=None) -> None:
@@ -49,7 +53,7 @@ def main(argv=None) -> None:
     sc = scenes.two_spheres(f=700.0)
     K = np.asarray(sc.K)
     truth = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
-    ways = ("raw", "averaged", "averaged + floor")
+    ways = ("raw", "averaged", "averaged + floor", "averaged + floor + ell")
     rows: dict[str, list] = {w: [] for w in ways}
     t0 = time.time()
     print(f"noise floor check: two spheres, f 700 px, sigma {a.sigma:g} px, {a.trials} trials, seeds "
@@ -57,9 +61,11 @@ def main(argv=None) -> None:
     for t in range(a.trials):
         rng = np.random.default_rng(a.seed + t)
         raw = [np.asarray(scenes.paper_noise(v, a.sigma, rng), np.float64) for v in sc.outlines]
-        avg, noise = zip(*(averaged(q) for q in raw))
+        avg, noise, ell = zip(*(averaged(q) for q in raw))
         for way, outs, kw in (("raw", raw, {}), ("averaged", list(avg), {}),
-                              ("averaged + floor", list(avg), {"outline_noise": list(noise)})):
+                              ("averaged + floor", list(avg), {"outline_noise": list(noise)}),
+                              ("averaged + floor + ell", list(avg), {"outline_noise": list(noise),
+                                                                     "outline_noise_ell": list(ell)})):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 c = sorjax.calibrate(outs, outline_error=0.0, **kw)
@@ -73,7 +79,7 @@ def main(argv=None) -> None:
         with np.errstate(invalid="ignore", divide="ignore"):
             z = np.sqrt(np.nanmean((err[ok] / std[ok]) ** 2, axis=0)) if ok.any() else np.full(4, np.nan)
         f_err = np.sqrt(np.mean(err[ok][:, :2] ** 2)) if ok.any() else np.nan
-        print(f"  {way:17s} calibrated {ok.sum():2d}/{len(ok)}  focal RMS error {f_err:6.2f} px  median std "
+        print(f"  {way:22s} calibrated {ok.sum():2d}/{len(ok)}  focal RMS error {f_err:6.2f} px  median std "
               f"{np.median(std[:, :2]):6.2f} px  rms z (fu fv u0 v0) " + " ".join(f"{v:.2f}" for v in z))
 
 

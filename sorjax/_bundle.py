@@ -102,9 +102,15 @@ class BundleProblem(eqx.Module):
     view's residual sum of squares as at least ``n_j noise_j^2`` (``n_j`` its samples
     counted), so that the covariance, the model checks and the solver's stopping test
     (:func:`step_sigmas`) are not told that the views are noise-free.  The cost does
-    not depend on it.  The noise's correlation length is still read off the residuals,
-    and its level is one for all views (:func:`noise_blocks`): a floor on one view
-    raises the level the others are judged at too."""
+    not depend on it.  The noise's level is one for all views (:func:`noise_blocks`): a
+    floor on one view raises the level the others are judged at too.
+
+    ``noise_ell`` (V,): the correlation length along the curve (px) of the noise behind
+    each floor (NaN or 0: unknown), or None.  A view whose floor binds takes it as its
+    noise's correlation length; otherwise it is read off the residuals
+    (:func:`sorjax._noise.estimate_noise`), which for an averaged outline are smooth and
+    read as noise correlated over tens of pixels: standard deviations about 4x too
+    large (``experiments/noise_floor.py``)."""
 
     fields: DistanceField
     samples: Float[Array, "V N 2"]
@@ -113,6 +119,7 @@ class BundleProblem(eqx.Module):
     n_dist: int = eqx.field(static=True, default=0)
     fixed: Float[Array, "4"] | None = None
     noise: Float[Array, " V"] | None = None
+    noise_ell: Float[Array, " V"] | None = None
 
     @property
     def used(self):
@@ -518,7 +525,7 @@ def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Optio
     ``(cov, s2, step, ell)`` with ``s2 = |r|^2 / (VN - p)`` (normalised units^2;
     each view's share at least its noise floor, :func:`floored_rss`),
     ``step`` the Gauss-Newton step's Mahalanobis length (:func:`step_sigmas`) and
-    ``ell`` the outline noise's correlation length (px, :mod:`sorjax._noise`).
+    ``ell`` (V,) each view's outline noise correlation length (px, :mod:`sorjax._noise`).
 
     The sandwich ``F^-1 G^T Sigma_r G F^-1`` of least squares, with
     ``Sigma_r`` the residuals' covariance under the outline noise model of
@@ -561,7 +568,7 @@ def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Optio
     F_inv = (U * jnp.where(null, 0.0, 1.0 / jnp.where(null, 1.0, lam))) @ U.T
     geo = noise_geometry_at(smooth, feet_s, scale, a_s)
     ell, level = estimate_noise(geo, r.reshape(geo.a.shape), J, options.noise_ell_min_px, options.noise_ell_max_px,
-                                rss=floored_rss(r, problem))
+                                floor=view_floors(problem), floor_ell=problem.noise_ell)
     meat = level * noise_meat(G, unit_blocks(geo, ell))
     cov_k = F_inv @ meat @ F_inv
 
@@ -578,8 +585,8 @@ def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Optio
 
 def noise_blocks(problem: BundleProblem, feet, T, ell, s2, a) -> Float[Array, "V N N"]:
     """The residuals' covariance per view (normalised units^2) under the outline noise
-    model (:mod:`sorjax._noise`) with correlation length ``ell`` px (the bundle's
-    estimate, :attr:`BundleOut.noise_ell`), its level from the residual variance
+    model (:mod:`sorjax._noise`) with correlation length ``ell`` px, one or (V,) one per
+    view (the bundle's, :attr:`BundleOut.noise_ell`), its level from the residual variance
     ``s2`` of the model fitted at ``y``: ``sigma_n^2 = s2 n / tr S`` (``n`` samples
     counted), ``a`` as for :func:`noise_geometry_at`.  What the model checks weigh
     their scores with."""
@@ -587,6 +594,14 @@ def noise_blocks(problem: BundleProblem, feet, T, ell, s2, a) -> Float[Array, "V
     S = unit_blocks(geo, ell)
     tr = jnp.sum(jnp.trace(S, axis1=1, axis2=2))
     return S * (s2 * jnp.sum(problem.weights) / jnp.maximum(tr, 1e-300))
+
+
+def view_floors(problem: BundleProblem):
+    """(V,) each view's residual sum of squares floor ``n_j noise_j^2`` (normalised
+    units^2; ``n_j`` the sum of its weights), or None without floors."""
+    if problem.noise is None:
+        return None
+    return jnp.sum(problem.weights, axis=1) * problem.noise**2
 
 
 def floored_rss(r, problem: BundleProblem):
@@ -597,7 +612,7 @@ def floored_rss(r, problem: BundleProblem):
     rss = jnp.sum(jnp.reshape(r, problem.weights.shape) ** 2, axis=1)
     if problem.noise is None:
         return jnp.sum(rss)
-    return jnp.sum(jnp.maximum(rss, jnp.sum(problem.weights, axis=1) * problem.noise**2))
+    return jnp.sum(jnp.maximum(rss, view_floors(problem)))
 
 
 def residual_variance(r, y, problem: BundleProblem, n_fixed=0):
@@ -643,14 +658,15 @@ def _placeholder_outline(m: int):
 
 
 def make_problem(points_n, n_samples: int, aspect=None, inliers=None, used=None, fixed=None,
-                 noise=None) -> BundleProblem:
+                 noise=None, noise_ell=None) -> BundleProblem:
     """The :class:`BundleProblem` of (V, M, 2) normalised outline points: fields,
     ``n_samples`` samples per view (:func:`sorjax._field.setup`), their corner weights
     times the optional (V, N) 0/1 ``inliers`` mask and the (V,) bool ``used`` mask (a
     masked view keeps its slot: a placeholder field, all weights zero); ``aspect`` the
     known ``fu / fv``, NaN or None (free); ``fixed`` (4,) the chart values of intrinsics
     held fixed (:func:`fixed_chart`; NaN: free) or None; ``noise`` (V,) the views' noise
-    floors (normalised units; :attr:`BundleProblem.noise`) or None.
+    floors (normalised units; :attr:`BundleProblem.noise`) or None; ``noise_ell`` (V,)
+    their correlation lengths (px; :attr:`BundleProblem.noise_ell`) or None.
 
     Pure (jit / vmap / grad); nothing is kept between calls: a caller that needs the
     problem twice builds it once and passes it on."""
@@ -661,7 +677,8 @@ def make_problem(points_n, n_samples: int, aspect=None, inliers=None, used=None,
     a = jnp.asarray(jnp.nan if aspect is None else aspect, jnp.float64)
     problem = _build_problem(pts, used, inl, a, n_samples)
     return dataclasses.replace(problem, fixed=None if fixed is None else jnp.asarray(fixed, jnp.float64),
-                               noise=None if noise is None else jnp.asarray(noise, jnp.float64))
+                               noise=None if noise is None else jnp.asarray(noise, jnp.float64),
+                               noise_ell=None if noise_ell is None else jnp.asarray(noise_ell, jnp.float64))
 
 
 def with_model(base: BundleProblem, aspect, fixed=None) -> BundleProblem:
@@ -794,7 +811,8 @@ def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Opti
     n_cov = 4 + problem.n_dist
     init = (jnp.asarray(0, jnp.int32), jnp.asarray(False), jnp.asarray(False), jnp.asarray(True),
             jnp.asarray(jnp.inf), (ks[order[0]], a0), jnp.full(n_res, jnp.nan),
-            (jnp.full((n_cov, n_cov), jnp.nan), jnp.asarray(jnp.nan), jnp.asarray(jnp.nan)), jnp.asarray(0, jnp.int32))
+            (jnp.full((n_cov, n_cov), jnp.nan), jnp.asarray(jnp.nan), jnp.full(problem.weights.shape[0], jnp.nan)),
+            jnp.asarray(0, jnp.int32))
     _, _, _, bad, _, y, r, cov, total = jax.lax.while_loop(cond, body, init)
     return y, ~bad, total, r, cov
 
@@ -898,8 +916,9 @@ class BundleOut(eqx.Module):
         evidence: the cost (px^2) by which the best camera with no perspective fits
             worse (:func:`orthographic_cost`).
         n: the number of samples counted (the sum of the weights).
-        noise_ell: the outline noise's correlation length along the curve (px), as
-            the covariance's noise model estimated it (:mod:`sorjax._noise`).
+        noise_ell: (V,) each view's outline noise correlation length along the curve
+            (px), as the covariance's noise model took it (:mod:`sorjax._noise`: one
+            matched to the residuals, or the view's floor's, :attr:`BundleProblem.noise_ell`).
     """
 
     y: tuple
@@ -915,7 +934,7 @@ class BundleOut(eqx.Module):
     ok: Array
     evidence: Float[Array, ""]
     n: Float[Array, ""]
-    noise_ell: Float[Array, ""]
+    noise_ell: Float[Array, " V"]
 
 
 def pin_params(k, problem: BundleProblem):

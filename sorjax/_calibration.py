@@ -723,38 +723,43 @@ def view_homologies(homologies, n_samples: int) -> ViewHomologies:
             infinity_z=np.float64(np.inf if h.infinity_z is None else float(h.infinity_z)),
             at_infinity=np.bool_(h.v_x_at_infinity), is_conic=np.bool_(h.is_conic),
             converged=np.bool_(bool(h.converged)), steps=np.int32(int(h.steps)), inliers=inl,
+            noise_ell=np.float64(np.nan if h.noise_ell is None else float(h.noise_ell)),
         )
     rows = [row(h) for h in homologies]
     return ViewHomologies(**{k: np.stack([r[k] for r in rows]) for k in rows[0]})
 
 
 @functools.partial(jax.jit, static_argnames=("method",))
-def _core(points, homs, aspect, options, image_size, valid, fixed=None, noise=None, *, method: str = "bundle"):
+def _core(points, homs, aspect, options, image_size, valid, fixed=None, noise=None, noise_ell=None, *,
+          method: str = "bundle"):
     """One method's estimate (:func:`sorjax.core.calibrate_homologies`): one compiled
     program per method and padded view count.  The bundle's program holds no linear
     method beside it (the three linear methods' covariances in the same program made
     it a quarter larger, for the one result a call returns); a linear method's program
     holds no solver.  ``fixed``: intrinsics held fixed (px, NaN: free) or None
     (another compiled program: the one of a free camera stays as it was); ``noise``
-    (V,) the views' noise floors, px (0: none)."""
+    (V,) the views' noise floors, px (0: none), ``noise_ell`` (V,) their correlation
+    lengths, px (0: unknown)."""
     return calibrate_homologies(points, homs, method, aspect, options=options, image_size=image_size, valid=valid,
-                                fixed=fixed, noise=noise)
+                                fixed=fixed, noise=noise, noise_ell=noise_ell)
 
 
 @functools.partial(jax.jit, static_argnames=("distortion",))
-def _core_distorted(points, homs, aspect, options, image_size, valid, distortion, fixed=None, noise=None):
+def _core_distorted(points, homs, aspect, options, image_size, valid, distortion, fixed=None, noise=None,
+                    noise_ell=None):
     """The bundle with radial distortion (``distortion`` "k1" or "k1k2")."""
     return calibrate_homologies(points, homs, "bundle", aspect, options=options, image_size=image_size, valid=valid,
-                                distortion=distortion, fixed=fixed, noise=noise)
+                                distortion=distortion, fixed=fixed, noise=noise, noise_ell=noise_ell)
 
 
 def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, options: Options, image_size,
-              distortion: str = "none", fixed=None, leave_out: Sequence[int] = (), noise=None):
+              distortion: str = "none", fixed=None, leave_out: Sequence[int] = (), noise=None, noise_ell=None):
     """The core on ``V`` views padded to :func:`_bucket` (copies of view 0, masked);
     returns the result of ``method`` as numpy, cut back to ``V`` views.  ``fixed``
     (4,) ``(fu, fv, u0, v0)`` px held fixed (NaN: free), or None; ``leave_out``: views
     masked out as well (the same compiled program); ``noise`` (V,) the views' noise
-    floors, px (None: 0, the same compiled program)."""
+    floors, px, and ``noise_ell`` (V,) their correlation lengths, px (None: 0, the same
+    compiled program)."""
     V = points.shape[0]
     B = _bucket(V)
     pad = lambda x: np.concatenate([x, np.repeat(x[:1], B - V, axis=0)]) if B > V else x  # noqa: E731
@@ -764,10 +769,11 @@ def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, opt
             np.asarray(image_size, np.float64), valid)
     fixed = None if fixed is None else np.asarray(fixed, np.float64)
     noise = pad(np.zeros(V) if noise is None else np.asarray(noise, np.float64))
+    noise_ell = pad(np.zeros(V) if noise_ell is None else np.asarray(noise_ell, np.float64))
     if distortion == "none":
-        r = _core(*args, fixed, noise, method=method)
+        r = _core(*args, fixed, noise, noise_ell, method=method)
     else:
-        r = _core_distorted(*args, distortion, fixed, noise)
+        r = _core_distorted(*args, distortion, fixed, noise, noise_ell)
     r = jax.tree_util.tree_map(np.asarray, r)
     per_view = ("used", "drop_reason", "view_rms", "v_x", "l_s")
     r = eqx.tree_at(lambda x: [getattr(x, k) for k in per_view], r, [getattr(r, k)[:V] for k in per_view])
@@ -782,7 +788,7 @@ def _estimate(K) -> np.ndarray:
 
 
 def jackknife(r, points: np.ndarray, homs: ViewHomologies, method: str, aspect, options: Options, image_size,
-              fixed=None, left_out: Sequence[int] = (), noise=None):
+              fixed=None, left_out: Sequence[int] = (), noise=None, noise_ell=None):
     """The core result ``r`` checked by leaving out each used view in turn, for
     outlines of measured quality (``calibrate(outline_error="measured")``).
 
@@ -798,8 +804,8 @@ def jackknife(r, points: np.ndarray, homs: ViewHomologies, method: str, aspect, 
     are set to NaN and the result code becomes ``degenerate``.  Returns ``(r, notes)``: the result with ``K``, ``covariance``,
     ``std``, ``determined``, ``omega`` and ``result`` updated, and warning texts (none
     when nothing was determined).  ``left_out``: views ``r`` was computed without
-    (:func:`dominant_view`, left out by :func:`calibrate`), left out of every run; ``noise``: the
-    views' noise floors (px) or None.  Costs one run of the compiled core per used view."""
+    (:func:`dominant_view`, left out by :func:`calibrate`), left out of every run; ``noise``,
+    ``noise_ell``: the views' noise floors and their correlation lengths (px) or None.  Costs one run of the compiled core per used view."""
     det = np.asarray(r.determined, bool)
     if not det.any() or code_name(r.result) not in ("successful", "degenerate", "only_principal_point"):
         return r, []
@@ -809,7 +815,7 @@ def jackknife(r, points: np.ndarray, homs: ViewHomologies, method: str, aspect, 
     loo = np.full((n, 4), np.nan)
     for k, i in enumerate(used):
         ri = _run_core(points, homs, method, aspect, options, image_size, "none", fixed,
-                       leave_out=[int(i), *left_out], noise=noise)
+                       leave_out=[int(i), *left_out], noise=noise, noise_ell=noise_ell)
         loo[k] = _estimate(ri.K_raw)
     held = np.zeros(4, bool) if fixed is None else np.isfinite(np.asarray(fixed, np.float64))
     loo[:, held] = est[held]
@@ -911,14 +917,15 @@ def _check_outline_error(outline_error):
     return px(outline_error), None, False
 
 
-def _outline_noise(outline_noise, outlines, n: int):
-    """:func:`calibrate`'s ``outline_noise`` as (n,) px (0: none), or None (none):
-    given, or the outlines' own ``noise_rms`` attributes."""
+def _outline_noise(outline_noise, outlines, n: int, name: str = "outline_noise", attr: str = "noise_rms"):
+    """:func:`calibrate`'s ``outline_noise`` (or ``outline_noise_ell``: ``name``, read
+    from the attribute ``attr``) as (n,) px (0: none), or None (none): given, or the
+    outlines' own attributes."""
     if outline_noise is None:
-        own = [getattr(o, "noise_rms", None) for o in outlines] if isinstance(outlines, (list, tuple)) else []
+        own = [getattr(o, attr, None) for o in outlines] if isinstance(outlines, (list, tuple)) else []
         own = [float(e) if _is_number(e) and math.isfinite(e) and e > 0 else 0.0 for e in own]
         return np.array(own) if len(own) == n and any(own) else None
-    bad = (f"outline_noise must be a finite number of pixels >= 0, one such number per outline (NaN: none), or "
+    bad = (f"{name} must be a finite number of pixels >= 0, one such number per outline (NaN: none), or "
            f"None; got {outline_noise!r:.80}.")
     vals = np.atleast_1d(np.asarray(outline_noise, dtype=object))
     if vals.ndim != 1 or not all(_is_number(v) and (math.isnan(v) or (math.isfinite(v) and v >= 0)) for v in vals):
@@ -927,7 +934,7 @@ def _outline_noise(outline_noise, outlines, n: int):
     if np.ndim(outline_noise) == 0:
         return np.full(n, vals[0])
     if vals.size != n:
-        raise ValueError(f"outline_noise: got {vals.size} values for {n} outlines; give one number (px) per outline, "
+        raise ValueError(f"{name}: got {vals.size} values for {n} outlines; give one number (px) per outline, "
                          "in the same order, or one number for all.")
     return vals
 
@@ -994,6 +1001,7 @@ def calibrate(
     principal_point=None,
     focal_length: float | None = None,
     outline_noise: float | Sequence[float] | None = None,
+    outline_noise_ell: float | Sequence[float] | None = None,
     throw: bool = False,
 ) -> Calibration:
     """Calibrate a camera from the outlines of surfaces of revolution.
@@ -1082,6 +1090,16 @@ def calibrate(
             each view's residuals as at least this
             (:attr:`sorjax._bundle.BundleProblem.noise`); the cost, and so ``K``, is
             the same.
+        outline_noise_ell: the correlation length along the curve (px) of the noise
+            behind each ``outline_noise`` (:attr:`Homology.noise_ell` of the outline
+            before it was processed): one number, one per outline (NaN: unknown), or
+            None (default: the ``noise_ell`` attribute of outline arrays that carry
+            one, as :func:`sorjax.outlines_from_image`'s do).  Where a floor binds,
+            the covariance takes this length for the view's noise instead of reading
+            one off residuals that no longer show it: an averaged outline is smooth,
+            and its residuals read as noise correlated over tens of pixels, which
+            made the standard deviations about 4x too large
+            (``experiments/noise_floor.py``).
         throw: raise :class:`CalibrationError` instead of returning a failed result.
 
     Returns:
@@ -1131,6 +1149,7 @@ def calibrate(
     prepared = _as_outlines(outlines, n_points)
     outs, smoothed = [o for o, _ in prepared], [j for _, j in prepared]
     noise = _outline_noise(outline_noise, outlines, len(outs))
+    noise_ell = _outline_noise(outline_noise_ell, outlines, len(outs), "outline_noise_ell", "noise_ell")
     if per_outline is not None and len(per_outline) != len(outs):
         raise ValueError(f"outline_error: got {len(per_outline)} per-outline errors for {len(outs)} outlines; give one "
                          "number (px) per outline, in the same order, or one number for all, or 'measured'.")
@@ -1195,7 +1214,7 @@ def calibrate(
         fixed = (math.nan, math.nan if f_fixed is None else f_fixed) + (pp_fixed or (math.nan, math.nan))
     aspect = math.nan if aspect_ratio is None else float(aspect_ratio)
     size = (math.nan, math.nan) if image_size is None else image_size
-    run = functools.partial(_run_core, points, homs, method, aspect, noise=noise)
+    run = functools.partial(_run_core, points, homs, method, aspect, noise=noise, noise_ell=noise_ell)
     r = run(options, size, distortion, fixed)
     # outlines of measured quality (found in images): a view the consistency check blames
     # almost alone is left out, and the rest calibrated again (Options.measured_leave_out)
@@ -1216,7 +1235,7 @@ def calibrate(
 
     if measure and distortion == "none":
         r, jack_notes = jackknife(r, points, homs, method, aspect, options, size, fixed, left_out=list(left_out),
-                                  noise=noise)
+                                  noise=noise, noise_ell=noise_ell)
         floor_note += jack_notes
     dup_of = np.asarray(r.checks.duplicate_of)
     notes = (floor_note + view_notes(homs, r.drop_reason, dup_of=dup_of) + model_notes(r, outline_error, fixed)

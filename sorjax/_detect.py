@@ -208,6 +208,10 @@ class ImageOutline(np.ndarray):
         its own mirror image (:func:`symmetric_average`; NaN when it was not): the
         noise that the averaged outline no longer shows, which :func:`sorjax.calibrate`
         takes as each view's noise floor (its ``outline_noise``).
+    noise_ell : float
+        The correlation length along the curve (px) of that noise, read off the same
+        fit's residuals (:attr:`sorjax.Homology.noise_ell`; NaN when not averaged):
+        :func:`sorjax.calibrate`'s ``outline_noise_ell``.
 
     Arithmetic returns plain arrays' values with these attributes copied; use
     ``np.asarray(o)`` for a plain array."""
@@ -217,19 +221,21 @@ class ImageOutline(np.ndarray):
     accepted: float
     symmetry_rms: float
     noise_rms: float
+    noise_ell: float
 
     def __new__(cls, points, *, outline_error=math.nan, edge_contrast=math.nan, accepted=math.nan,
-                symmetry_rms=math.nan, noise_rms=math.nan):
+                symmetry_rms=math.nan, noise_rms=math.nan, noise_ell=math.nan):
         obj = np.asarray(points, dtype=np.float64).view(cls)
         obj.outline_error = float(outline_error)
         obj.edge_contrast = float(edge_contrast)
         obj.accepted = float(accepted)
         obj.symmetry_rms = float(symmetry_rms)
         obj.noise_rms = float(noise_rms)
+        obj.noise_ell = float(noise_ell)
         return obj
 
     def __array_finalize__(self, obj):
-        for k in ("outline_error", "edge_contrast", "accepted", "symmetry_rms", "noise_rms"):
+        for k in ("outline_error", "edge_contrast", "accepted", "symmetry_rms", "noise_rms", "noise_ell"):
             setattr(self, k, getattr(obj, k, math.nan))
 
     def __reduce__(self):  # pickles (worker processes) keep the attributes

@@ -1214,14 +1214,14 @@ def _finish_all(src: _Image, segs, *, refine, min_area, smooth, border, iteratio
                     q_quality = outline_quality(*again)
                     if q_quality["outline_error"] <= o.recut_gain * quality["outline_error"]:
                         p, quality, hom = again[0], q_quality, again[2]
-        noise = math.nan
+        noise = ell = math.nan
         if symmetric:
-            p, noise = _averaged(src, p, hom, o)
-        out.append(ImageOutline(p, **quality, noise_rms=noise))
+            p, noise, ell = _averaged(src, p, hom, o)
+        out.append(ImageOutline(p, **quality, noise_rms=noise, noise_ell=ell))
     return out
 
 
-def _averaged(src: _Image, p: np.ndarray, hom, o) -> tuple[np.ndarray, float]:
+def _averaged(src: _Image, p: np.ndarray, hom, o) -> tuple[np.ndarray, float, float]:
     """The refined outline ``p`` averaged with its mirror image
     (:func:`sorjax._detect.symmetric_average`, weighted by where
     :func:`sorjax._detect.refine_to_edges` confirms the image's edge), or ``p`` as it is
@@ -1231,17 +1231,21 @@ def _averaged(src: _Image, p: np.ndarray, hom, o) -> tuple[np.ndarray, float]:
     reach past it), and when the average crosses itself (where the mirror partners of
     neighbouring points lie on different parts of a thin or leaking outline;
     ``random_photo_set(126)`` had one).  Its error attributes stay those of ``p``.
-    Returns ``(outline, noise_rms)``: ``noise_rms`` the symmetry residual of ``p`` (px,
-    ``hom.rms``) when the outline was averaged, the noise that the averaged outline no
-    longer shows (:func:`sorjax.calibrate`'s ``outline_noise``), else NaN."""
+    Returns ``(outline, noise_rms, noise_ell)``: ``noise_rms`` the symmetry residual of
+    ``p`` (px, ``hom.rms``) when the outline was averaged, the noise that the averaged
+    outline no longer shows (:func:`sorjax.calibrate`'s ``outline_noise``), and
+    ``noise_ell`` its correlation length along the curve (px, ``hom.noise_ell``:
+    ``outline_noise_ell``); else NaN, NaN."""
     from ._detect import refine_to_edges, symmetric_average, symmetry_limit
     from ._outline import _segments_cross
 
     if hom is None or not float(hom.rms) <= symmetry_limit(p, o) or _border_sides(p, src.shape, margin=1.5):
-        return p, math.nan
+        return p, math.nan, math.nan
     _, stats = refine_to_edges((src.f64, src.shape), p, o, keep=True)
     q = symmetric_average(p, hom.W, stats["kept"], o)
-    return (p, math.nan) if _segments_cross(q) else (q, float(hom.rms))
+    if _segments_cross(q):
+        return p, math.nan, math.nan
+    return q, float(hom.rms), math.nan if hom.noise_ell is None else float(hom.noise_ell)
 
 
 def outlines_from_image(
@@ -1338,7 +1342,9 @@ def outlines_from_image(
         * ``noise_rms`` (px): the symmetry residual of the outline before it was
           averaged with its mirror image (NaN when it was not): its noise, which
           :func:`sorjax.calibrate` counts each view's residuals as at least
-          (``outline_noise``), because the averaged outline no longer shows it.
+          (``outline_noise``), because the averaged outline no longer shows it;
+        * ``noise_ell`` (px): that noise's correlation length along the curve (NaN
+          when not averaged), :func:`sorjax.calibrate`'s ``outline_noise_ell``.
 
     Raises
     ------

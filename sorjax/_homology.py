@@ -84,6 +84,11 @@ class Homology(eqx.Module):
             any trimming: :func:`sorjax.calibrate` judges whether a view is symmetric
             at all by it, so that trimming never makes an asymmetric outline (a
             segmentation leak) pass.  None for homologies built by hand.
+        noise_ell: the correlation length along the curve (px) of the outline's
+            noise, read off the fit's residuals (:mod:`sorjax._noise`); with ``rms``,
+            what an outline later averaged with its own mirror image passes on as its
+            noise floor (:func:`sorjax.calibrate`'s ``outline_noise``,
+            ``outline_noise_ell``).  None for homologies built by hand.
     """
 
     l_s: Float[Array, "3"]
@@ -97,6 +102,7 @@ class Homology(eqx.Module):
     infinity_z: Float[Array, ""] | None = None
     inliers: Bool[Array, " N"] | None = None
     rms_untrimmed: Float[Array, ""] | None = None
+    noise_ell: Float[Array, ""] | None = None
 
     @property
     def trimmed(self) -> float:
@@ -279,4 +285,4 @@ def fit_homology(
         raise FloatingPointError("every start of the homology fit gave a non-finite cost")
     return Homology(l_s=h.l_s, v_x=h.v_x, W=h.W, rms=h.rms, cost=h.cost, converged=h.converged, steps=h.steps,
                     conic_rms=h.conic_rms, infinity_z=h.infinity_z, inliers=h.inliers,
-                    rms_untrimmed=h.rms_untrimmed)
+                    rms_untrimmed=h.rms_untrimmed, noise_ell=h.noise_ell)

@@ -98,8 +98,10 @@ def noise_geometry(a, w, feet, px_per_knot, n_knots: int) -> NoiseGeometry:
 
 def unit_blocks(geo: NoiseGeometry, ell_px) -> Float[Array, "V N N"]:
     """``S(ell)`` per view: the residuals' covariance for outline noise of unit
-    variance (normalised units^2 when ``a``, ``w`` are) and correlation length ``ell`` px."""
-    rho = jnp.exp(-(geo.dist**2) / (4.0 * ell_px**2))
+    variance (normalised units^2 when ``a``, ``w`` are) and correlation length ``ell`` px
+    (one for all views, or (V,) one per view)."""
+    ell = jnp.reshape(jnp.asarray(ell_px, geo.a.dtype), (-1, 1, 1))
+    rho = jnp.exp(-(geo.dist**2) / (4.0 * ell**2))
     a, w = geo.a, geo.w
     return (a[:, :, None] * a[:, None, :] * rho[0] - a[:, :, None] * w[:, None, :] * rho[1]
             - w[:, :, None] * a[:, None, :] * rho[2] + w[:, :, None] * w[:, None, :] * rho[3])
@@ -119,7 +121,7 @@ def ell_grid(ell_min_px, ell_max_px):
 
 def noise_moments(geo: NoiseGeometry, J: Float[Array, "VN p"], ell_min_px, ell_max_px):
     """The moments :func:`estimate_noise` matches, on :func:`ell_grid`: ``(ells, searched,
-    m)`` with ``m`` (N_ELL, 3) the sums ``sum(A_k * S(ell))`` of ``A_k`` the diagonal
+    m)`` with ``m`` (N_ELL, V, 3) each view's sums ``sum(A_k * S(ell))`` of ``A_k`` the diagonal
     blocks of ``Q P_k Q`` (``P_k`` the identity, the neighbour pairs, the mirror pairs;
     ``Q`` the projector off ``J``'s columns) against the unit-variance residual
     covariance ``S(ell)`` (:func:`unit_blocks`).
@@ -159,43 +161,63 @@ def noise_moments(geo: NoiseGeometry, J: Float[Array, "VN p"], ell_min_px, ell_m
     n_gap = N // 2 + 1
     ss = jnp.transpose(A * (a[:, :, None] * a[:, None, :]), (2, 3, 0, 1)).reshape(N * N, 3, V)
     ss = jax.ops.segment_sum(ss, gap.reshape(-1), n_gap)  # (n_gap, 3, V)
-    ss = jnp.transpose(ss, (1, 2, 0)).reshape(3, V * n_gap)
-    x_ss = geo.dist[0][:, 0, :n_gap].reshape(-1)  # (V n_gap): row 0 holds every gap once
+    ss = jnp.transpose(ss, (1, 2, 0))  # (3, V, n_gap)
+    x_ss = geo.dist[0][:, 0, :n_gap]  # (V, n_gap): row 0 holds every gap once
     iu, ju = jnp.triu_indices(N, 1)
     ff = A * (w[:, :, None] * w[:, None, :])
-    B = jnp.concatenate([ss, (-2.0 * A * (a[:, :, None] * w[:, None, :])).reshape(3, -1),
-                         2.0 * ff[:, :, iu, ju].reshape(3, -1)], axis=1)
-    const = jnp.sum(jnp.diagonal(ff, axis1=2, axis2=3), axis=(1, 2))  # rho_ff = 1 on the diagonal
-    x = jnp.concatenate([x_ss, geo.dist[1].reshape(-1), geo.dist[3][:, iu, ju].reshape(-1)]) ** 2 / 4.0
+    B = jnp.concatenate([ss, (-2.0 * A * (a[:, :, None] * w[:, None, :])).reshape(3, V, -1),
+                         2.0 * ff[:, :, iu, ju]], axis=2)  # (3, V, L)
+    const = jnp.sum(jnp.diagonal(ff, axis1=2, axis2=3), axis=2).T  # (V, 3): rho_ff = 1 on the diagonal
+    x = jnp.concatenate([x_ss, geo.dist[1].reshape(V, -1), geo.dist[3][:, iu, ju]], axis=1) ** 2 / 4.0
     n_pairs = (N_ELL + 1) // 2
 
     def down(carry, _):  # two grid values, then each squared: two quarter-octaves lower
         e1, e2 = carry
-        return (e1 * e1, e2 * e2), jnp.stack([B @ e1, B @ e2]) + const
+        return (e1 * e1, e2 * e2), jnp.stack([jnp.einsum("kvl,vl->vk", B, e1),
+                                              jnp.einsum("kvl,vl->vk", B, e2)]) + const
 
     top = (jnp.exp(-x / ells[-1] ** 2), jnp.exp(-x / ells[-2] ** 2))
-    _, m = jax.lax.scan(down, top, None, length=n_pairs)  # (n_pairs, 2, 3): ells[-1 - 2i], ells[-2 - 2i]
-    m = m.reshape(2 * n_pairs, 3)[:N_ELL][::-1]  # ascending, as ells
+    _, m = jax.lax.scan(down, top, None, length=n_pairs)  # (n_pairs, 2, V, 3): ells[-1 - 2i], ells[-2 - 2i]
+    m = m.reshape(2 * n_pairs, V, 3)[:N_ELL][::-1]  # ascending, as ells
     return ells, searched, m
 
 
 def estimate_noise(geo: NoiseGeometry, r: Float[Array, "V N"], J: Float[Array, "VN p"], ell_min_px, ell_max_px,
-                   rss=None):
+                   floor=None, floor_ell=None):
     """``(ell, sigma_n^2)`` from the residuals ``r`` at an optimum of a model with
     Jacobian ``J`` (the module's moment matching over :func:`ell_grid`, the moments
-    :func:`noise_moments`; ``sigma_n^2`` in ``r``'s units squared, ``ell`` px).
-    Residuals that are all zero give ``sigma_n^2 = 0``.  ``rss``: the residual sum of
-    squares the level is matched to, when not ``|r|^2`` (one with per-view noise
-    floors, :func:`sorjax._bundle.floored_rss`); the correlation length is matched to
-    ``r`` alone."""
+    :func:`noise_moments`; ``sigma_n^2`` in ``r``'s units squared, ``ell`` (V,) each
+    view's correlation length, px).  Residuals that are all zero give ``sigma_n^2 = 0``.
+
+    ``floor`` (V,): each view's residual sum of squares counted as at least this
+    (``n_j noise_j^2``, a noise floor: :func:`sorjax._bundle.floored_rss`), or None.
+    ``floor_ell`` (V,): the correlation length (px) of the noise behind each floor
+    (NaN or <= 0: unknown), or None.  A view whose floor binds (above its residuals'
+    sum of squares) and whose floor's correlation length is known takes that length
+    (the nearest grid value): its residuals no longer show its noise (an outline
+    averaged with its mirror image is smooth, and would read as noise correlated over
+    tens of pixels).  The other views share one length matched to their residuals.
+    The level ``sigma_n^2 = sum_j max(|r_j|^2, floor_j) / sum_j tr(Q S_j(ell_j) Q)``
+    is one for all views."""
     ells, searched, m = noise_moments(geo, J, ell_min_px, ell_max_px)
-    rr = jnp.sum(r**2)
-    emp = jnp.stack([jnp.einsum("vn,vnm,vm->", r, geo.near, r), jnp.einsum("vn,vnm,vm->", r, geo.mirror, r)])
-    emp = emp / jnp.maximum(rr, 1e-300)
-    m0, ratios = m[:, 0], m[:, 1:] / jnp.maximum(m[:, 0:1], 1e-300)
+    V = r.shape[0]
+    rss = jnp.sum(r**2, axis=1)
+    floor = jnp.zeros(V) if floor is None else jnp.asarray(floor, r.dtype)
+    fell = jnp.full(V, jnp.nan) if floor_ell is None else jnp.asarray(floor_ell, r.dtype)
+    known = (floor > rss) & (fell > 0)  # NaN compares False
+    use = (~known).astype(r.dtype)
+    emp = jnp.stack([jnp.einsum("vn,vnm,vm->v", r, geo.near, r), jnp.einsum("vn,vnm,vm->v", r, geo.mirror, r)])
+    emp = (emp @ use) / jnp.maximum(rss @ use, 1e-300)
+    mu = jnp.einsum("kvj,v->kj", m, use)
+    ratios = mu[:, 1:] / jnp.maximum(mu[:, 0:1], 1e-300)
     miss = jnp.where(searched, jnp.sum((ratios - emp) ** 2, axis=1), jnp.inf)
     k = jnp.argmin(miss)
-    return ells[k], (rr if rss is None else rss) / jnp.maximum(m0[k], 1e-300)
+    # the grid value nearest each known floor length (ell_k = ell_max 2^(-(N_ELL-1-k)/4))
+    lo = jnp.argmax(searched)
+    kf = jnp.round(N_ELL - 1 + 4.0 * jnp.log2(jnp.where(known, fell, 1.0) / ells[-1])).astype(k.dtype)
+    kv = jnp.where(known, jnp.clip(kf, lo, N_ELL - 1), k)
+    m0 = jnp.sum(m[kv, jnp.arange(V), 0])
+    return ells[kv], jnp.sum(jnp.maximum(rss, floor)) / jnp.maximum(m0, 1e-300)
 
 
 def knot_spacing_px(field: DistanceField, scale) -> Float[Array, ""]:

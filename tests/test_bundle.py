@@ -142,7 +142,7 @@ def test_noise_floor_raises_the_level_only_where_it_binds(scene):
     c0 = covariance(y, prob, jnp.eye(3))
     V = len(outs)
     zero = dataclasses.replace(prob, noise=jnp.zeros(V))
-    np.testing.assert_array_equal(np.asarray(covariance(y, zero, jnp.eye(3))[0]), np.asarray(c0[0]))
+    np.testing.assert_allclose(np.asarray(covariance(y, zero, jnp.eye(3))[0]), np.asarray(c0[0]), rtol=1e-10)
     floor = np.zeros(V)
     floor[0] = 3.0 * np.sqrt(rss[0] / n[0])
     high = dataclasses.replace(prob, noise=jnp.asarray(floor))
@@ -154,7 +154,20 @@ def test_noise_floor_raises_the_level_only_where_it_binds(scene):
     c1 = covariance(y, high, jnp.eye(3))
     np.testing.assert_allclose(float(c1[1]) / float(c0[1]), want / rss.sum(), rtol=1e-12)
     np.testing.assert_allclose(np.asarray(c1[0]), np.asarray(c0[0]) * want / rss.sum(), rtol=1e-9)
-    assert float(c1[3]) == float(c0[3])  # the correlation length is the residuals' own
+    np.testing.assert_array_equal(np.asarray(c1[3]), np.asarray(c0[3]))  # the correlation length: the residuals'
+    # the floor's own correlation length: taken where the floor binds (view 0, the grid
+    # value nearest it), ignored where it does not (views 1, 2: one length, matched to
+    # their residuals alone)
+    ell0 = float(c0[3][0])
+    given = jnp.asarray([4.0 * ell0, 0.25 * ell0, 0.25 * ell0])
+    c2 = covariance(y, dataclasses.replace(high, noise_ell=given), jnp.eye(3))
+    assert float(c2[3][0]) == pytest.approx(4.0 * ell0, rel=0.1)
+    assert float(c2[3][1]) == float(c2[3][2]) != pytest.approx(0.25 * ell0, rel=0.1)
+    assert float(c2[1]) == pytest.approx(float(c1[1]), rel=1e-12)  # s2 does not depend on the length
+    assert not np.allclose(np.asarray(c2[0]), np.asarray(c1[0]), rtol=1e-3)
+    # a length given where no floor binds changes nothing
+    c3 = covariance(y, dataclasses.replace(prob, noise=jnp.zeros(V), noise_ell=given), jnp.eye(3))
+    np.testing.assert_allclose(np.asarray(c3[0]), np.asarray(c0[0]), rtol=1e-10)
 
 
 def test_floored_rss_under_vmap_and_grad(scene):

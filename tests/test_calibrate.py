@@ -77,6 +77,22 @@ def test_outline_noise_is_a_floor_of_the_noise_level_not_of_the_estimate(spheres
         assert np.all(ratio > 2.0) and np.all(ratio < 4.0), ratio
         np.testing.assert_allclose(ratio, ratio[0], rtol=1e-9)  # one level for all
     np.testing.assert_array_equal(own.std, high.std)
+    # the floor's own correlation length (outline_noise_ell, ImageOutline.noise_ell):
+    # the view's noise model takes it where the floor binds; K stays
+    nan = [float("nan")] * (len(outs) - 1)
+    for L in (0.5, 12.0):
+        given = sorjax.calibrate(outs, outline_noise=[floor] + nan, outline_noise_ell=[L] + nan)
+        attr = sorjax.calibrate([ImageOutline(outs[0], noise_rms=floor, noise_ell=L), *outs[1:]])
+        np.testing.assert_allclose(np.asarray(given.K), np.asarray(base.K), rtol=1e-12)
+        np.testing.assert_array_equal(attr.std, given.std)
+        assert not np.allclose(given.std, high.std, rtol=0.02), (L, given.std, high.std)
+    short = sorjax.calibrate(outs, outline_noise=[floor] + nan, outline_noise_ell=[0.5] + nan)
+    long = sorjax.calibrate(outs, outline_noise=[floor] + nan, outline_noise_ell=[12.0] + nan)
+    assert np.all(short.std < long.std)  # noise correlated over longer arcs averages out less
+    with pytest.raises(ValueError, match="outline_noise_ell"):
+        sorjax.calibrate(outs, outline_noise=floor, outline_noise_ell=[1.0, 2.0])
+    with pytest.raises(ValueError, match="outline_noise_ell"):
+        sorjax.calibrate(outs, outline_noise=floor, outline_noise_ell="long")
     # with the outline error measured from the outlines, a floor counts as the residual
     # the outline would show
     measured = sorjax.calibrate(outs, outline_error="measured", outline_noise=2.0)
@@ -87,6 +103,8 @@ def test_outline_noise_is_a_floor_of_the_noise_level_not_of_the_estimate(spheres
     pts = np.stack([np.asarray(sorjax.make_outline(o).points) for o in outs])
     with pytest.raises(ValueError, match="noise must be one floor"):
         core.calibrate_homologies(pts, None, noise=np.ones(len(outs) + 1))
+    with pytest.raises(ValueError, match="noise_ell must be one correlation length"):
+        core.calibrate_homologies(pts, None, noise=1.0, noise_ell=np.ones((len(outs), 2)))
 
 
 def test_result_code_when_not_positive_definite(spheres):

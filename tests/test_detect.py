@@ -455,6 +455,7 @@ def test_image_outlines_are_averaged_with_their_mirror_image():
     assert both[1].outline_error == both[0].outline_error
     # the residual the averaged outline no longer shows is handed to the calibration as its noise
     assert math.isnan(both[0].noise_rms) and both[1].noise_rms > 0.5
+    assert math.isnan(both[0].noise_ell) and 0 < both[1].noise_ell < 32
     assert float(sorjax.fit_homology(both[1]).rms) < 0.1 * both[1].noise_rms  # (symmetric by construction)
 
 
@@ -466,8 +467,9 @@ def test_an_average_that_crosses_itself_is_not_taken(monkeypatch):
     src = X._as_bgr(np.ascontiguousarray(img))
     p = np.asarray(sorjax.outlines_from_mask(vase.astype(np.float64))[0])
     hom = T.outline_homology(p)
-    q, noise = X._averaged(src, p, hom, T.DetectOptions())
+    q, noise, ell = X._averaged(src, p, hom, T.DetectOptions())
     assert q is not p and noise == float(hom.rms)  # averaged (nothing to move, a new array)
+    assert ell == float(hom.noise_ell) and ell > 0  # with the length of the noise it no longer shows
 
     def figure_eight(p, W, confirmed, o):
         q = p.copy()
@@ -476,5 +478,5 @@ def test_an_average_that_crosses_itself_is_not_taken(monkeypatch):
         return q
 
     monkeypatch.setattr(T, "symmetric_average", figure_eight)
-    q, noise = X._averaged(src, p, hom, T.DetectOptions())
-    assert q is p and math.isnan(noise)
+    q, noise, ell = X._averaged(src, p, hom, T.DetectOptions())
+    assert q is p and math.isnan(noise) and math.isnan(ell)

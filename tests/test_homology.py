@@ -65,6 +65,11 @@ def test_noisy_fit_stays_close(spheres):
     h = sorjax.fit_homology(noisy)
     assert 0.05 < float(h.rms) < 1.0  # the noise shows in the residual
     assert float(angle_between_planes(spheres.K, h.l_s, view.l_s)) < 0.5
+    # and so does its correlation length (Gaussian smoothing of 2 px by construction;
+    # 4 px or more for the same noise smoothed by 6 px)
+    assert 1.0 <= float(h.noise_ell) <= 3.5
+    smoother = sorjax.fit_homology(scenes.paper_noise(view.outline, 1.0, 3, smooth_px=6.0))
+    assert float(smoother.noise_ell) >= 4.0
 
 
 def test_residuals_jit_vmap_and_gradient(spheres):

@@ -28,17 +28,29 @@ def _dense_moments(geo, J, ell_min, ell_max):
     A = [projected(np.broadcast_to(np.eye(N), (V, N, N))), projected(np.asarray(geo.near)),
          projected(np.asarray(geo.mirror))]
     ells = np.geomspace(ell_min, ell_max, nz.N_ELL)
-    return ells, np.array([[np.sum(a * np.asarray(nz.unit_blocks(geo, ell))) for a in A] for ell in ells])
+    # (N_ELL, V, 3): each view's moments
+    return ells, np.array([[np.sum(a * np.asarray(nz.unit_blocks(geo, ell)), axis=(1, 2)) for a in A]
+                           for ell in ells]).transpose(0, 2, 1)
 
 
-def _dense_estimate(geo, r, J, ell_min, ell_max):
-    """The module's moment matching on the dense moments: ``(ell, sigma_n^2)``."""
+def _dense_estimate(geo, r, J, ell_min, ell_max, floor=None, floor_ell=None):
+    """The module's moment matching on the dense moments, written out view by view:
+    ``(ell (V,), sigma_n^2)``.  A view whose floor binds and whose floor's length is
+    known takes the grid value nearest that length, and leaves the matching."""
     ells, m = _dense_moments(geo, J, ell_min, ell_max)
     r = np.asarray(r)
-    rr = np.sum(r**2)
-    emp = np.array([np.einsum("vn,vnm,vm->", r, geo.near, r), np.einsum("vn,vnm,vm->", r, geo.mirror, r)]) / rr
-    k = np.argmin(np.sum((m[:, 1:] / m[:, :1] - emp) ** 2, axis=1))
-    return ells[k], rr / m[k, 0]
+    V = r.shape[0]
+    rss = np.sum(r**2, axis=1)
+    floor = np.zeros(V) if floor is None else np.asarray(floor)
+    fell = np.full(V, np.nan) if floor_ell is None else np.asarray(floor_ell)
+    known = np.array([floor[v] > rss[v] and fell[v] > 0 for v in range(V)])
+    near = np.einsum("vn,vnm,vm->v", r, geo.near, r)
+    mirror = np.einsum("vn,vnm,vm->v", r, geo.mirror, r)
+    emp = np.array([near[~known].sum(), mirror[~known].sum()]) / max(rss[~known].sum(), 1e-300)
+    mu = m[:, ~known].sum(axis=1)
+    k = np.argmin(np.sum((mu[:, 1:] / np.maximum(mu[:, :1], 1e-300) - emp) ** 2, axis=1))
+    kv = [int(np.argmin(np.abs(np.log(ells / fell[v])))) if known[v] else k for v in range(V)]
+    return ells[kv], np.sum(np.maximum(rss, floor)) / sum(m[kv[v], v, 0] for v in range(V))
 
 
 def _geometry(rng, V, N=100, M=2048, spacing=1.3):
@@ -72,8 +84,36 @@ def test_estimate_noise_matches_the_dense_moments(V):
                                             [3:-3], 1, np.asarray(r)))
         ell, level = est(geo, r, J, 0.25, 32.0)
         ell_d, level_d = _dense_estimate(geo, r, J, 0.25, 32.0)
-        assert float(ell) == pytest.approx(ell_d, rel=1e-12)
+        assert ell.shape == (V,) and np.all(ell == ell[0])  # one length shared by every view
+        np.testing.assert_allclose(ell, ell_d, rtol=1e-12)
         assert float(level) == pytest.approx(level_d, rel=1e-9)
+
+
+def test_a_binding_floor_with_its_own_length_sets_that_views_length():
+    """A view whose floor binds and carries a correlation length takes it (the nearest
+    grid value) and leaves the matching; the level counts its floor at that length."""
+    rng = np.random.default_rng(3)
+    V = 3
+    geo, J, r = _geometry(rng, V, spacing=1.1)
+    r = jnp.asarray(np.apply_along_axis(lambda x: np.convolve(np.r_[x[-3:], x, x[:3]], np.ones(4) / 4, "same")
+                                        [3:-3], 1, np.asarray(r)))
+    rss = np.sum(np.asarray(r) ** 2, axis=1)
+    est = jax.jit(nz.estimate_noise)
+    ell0, level0 = est(geo, r, J, 0.25, 32.0)
+    # view 1 bound (floor 30x its rss) with a known length; view 2 bound, length unknown;
+    # view 0 not bound though its length is given
+    floor = jnp.asarray([0.5 * rss[0], 30.0 * rss[1], 10.0 * rss[2]])
+    fell = jnp.asarray([5.0, 1.7, np.nan])
+    ell, level = est(geo, r, J, 0.25, 32.0, floor, fell)
+    ell_d, level_d = _dense_estimate(geo, r, J, 0.25, 32.0, floor, fell)
+    np.testing.assert_allclose(ell, ell_d, rtol=1e-12)
+    assert float(level) == pytest.approx(level_d, rel=1e-9)
+    assert float(ell[1]) == pytest.approx(1.7, rel=0.1) and float(ell[0]) == float(ell[2])
+    # no floor at all: as without the arguments; floors that never bind: the same
+    for f, e in ((None, None), (jnp.zeros(V), fell), (0.1 * jnp.asarray(rss), jnp.full(V, 2.0))):
+        ell2, level2 = est(geo, r, J, 0.25, 32.0, f, e)
+        np.testing.assert_allclose(ell2, ell0, rtol=0)
+        assert float(level2) == pytest.approx(float(level0), rel=1e-12)
 
 
 def test_ell_grid_quarter_octaves_down_from_the_largest():
@@ -85,7 +125,10 @@ def test_ell_grid_quarter_octaves_down_from_the_largest():
     assert int(jnp.sum(searched)) == 13
     geo, J, r = _geometry(np.random.default_rng(0), 2)
     ell, _ = jax.jit(nz.estimate_noise, static_argnums=(3, 4))(geo, r, J, 1.0, 8.0)
-    assert 1.0 - 1e-12 <= float(ell) <= 8.0
+    assert np.all((1.0 - 1e-12 <= ell) & (ell <= 8.0))
+    # a floor's length outside the searched range is clipped into it
+    ell, _ = nz.estimate_noise(geo, r, J, 1.0, 8.0, jnp.full(2, 1e3), jnp.asarray([0.3, 50.0]))
+    np.testing.assert_allclose(ell, [1.0, 8.0], rtol=1e-12)
 
 
 def test_estimate_noise_under_vmap_equals_single_calls():
@@ -96,7 +139,7 @@ def test_estimate_noise_under_vmap_equals_single_calls():
     ell_v, level_v = jax.jit(jax.vmap(lambda g, r, J: nz.estimate_noise(g, r, J, 0.25, 32.0)))(geo, r, J)
     for k, (g, Jk, rk) in enumerate(cases):
         ell, level = nz.estimate_noise(g, rk, Jk, 0.25, 32.0)
-        assert float(ell_v[k]) == float(ell)
+        np.testing.assert_array_equal(ell_v[k], ell)
         assert float(level_v[k]) == pytest.approx(float(level), rel=1e-12)
 
 

@@ -48,7 +48,8 @@ def _intrinsics(K):
 
 
 def calibrate(points: Float[Array, "V M 2"], method: str = "bundle", aspect=jnp.nan, *, options: Options = Options(),
-              image_size=None, valid=None, distortion: str = "none", fixed=None, noise=None) -> CoreResult:
+              image_size=None, valid=None, distortion: str = "none", fixed=None, noise=None,
+              noise_ell=None) -> CoreResult:
     """Calibrate from ``V`` outlines of ``M`` evenly spaced pixel points each (e.g.
     :func:`sorjax.make_outline`'s points, positively oriented).
 
@@ -78,10 +79,16 @@ def calibrate(points: Float[Array, "V M 2"], method: str = "bundle", aspect=jnp.
             is at infinity: :func:`sorjax.core.with_noise_floor`) takes each view's
             residuals as at least this (:attr:`sorjax._bundle.BundleProblem.noise`);
             the cost, and so the estimate of ``K``, is the same.
+        noise_ell: (V,) the correlation length along the curve (px) of the noise
+            behind each floor (:attr:`sorjax.Homology.noise_ell` of the outline before
+            it was averaged; 0 or NaN: unknown), or None.  Where a floor binds, the
+            covariance takes this as the view's noise correlation length instead of
+            reading one off residuals that no longer show the noise
+            (:attr:`sorjax._bundle.BundleProblem.noise_ell`).
     """
     homs = fit_homologies(points, options)
     return calibrate_homologies(points, homs, method, aspect, options=options, image_size=image_size, valid=valid,
-                                distortion=distortion, fixed=fixed, noise=noise)
+                                distortion=distortion, fixed=fixed, noise=noise, noise_ell=noise_ell)
 
 
 def fit_homologies(points: Float[Array, "V M 2"], options: Options = Options(), sequential: bool | None = None
@@ -114,7 +121,7 @@ class _Common(NamedTuple):
     problem: BundleProblem
 
 
-def _common(points, homs: ViewHomologies, valid, options: Options, noise=None) -> _Common:
+def _common(points, homs: ViewHomologies, valid, options: Options, noise=None, noise_ell=None) -> _Common:
     radius = outline_radius(points)
     drop = view_verdicts(homs.rms, homs.rms_untrimmed, radius, homs.is_conic, homs.trimmed, valid, options)
     dup = duplicate_views(points, drop == USED, options)
@@ -131,7 +138,7 @@ def _common(points, homs: ViewHomologies, valid, options: Options, noise=None) -
         inliers=inliers,
         # the joint fields, samples, weights and noise floors: built once, shared by every method
         problem=make_problem(points_n, options.n_samples, None, inliers, used,
-                             noise=None if noise is None else noise * T[0, 0]),
+                             noise=None if noise is None else noise * T[0, 0], noise_ell=noise_ell),
     )
 
 
@@ -230,23 +237,31 @@ def views_needed(aspect, fixed=None):
     return jnp.where(pp_fixed & (n_free_intrinsics(aspect, fixed) <= 2), 1, 2)
 
 
-def _check(points, valid, image_size, aspect, noise=None):
+def _per_view(x, n: int, name: str, what: str):
+    """``x`` (one number or (n,)) as (n,) float64 with NaN or negative entries 0, or
+    None; a ValueError for any other shape."""
+    if x is None:
+        return None
+    x = jnp.asarray(x, jnp.float64)
+    if x.ndim > 1 or (x.ndim == 1 and x.shape[0] != n):
+        raise ValueError(f"{name} must be {what} per outline, shape ({n},), or one number; got shape {x.shape}")
+    x = jnp.broadcast_to(x, (n,))
+    return jnp.where(x > 0, x, 0.0)
+
+
+def _check(points, valid, image_size, aspect, noise=None, noise_ell=None):
     points = jnp.asarray(points, jnp.float64)
     valid = jnp.ones(points.shape[0], bool) if valid is None else jnp.asarray(valid, bool)
     image_size = _nan(2) if image_size is None else jnp.asarray(image_size, jnp.float64)
-    if noise is not None:  # (V,) px; NaN or negative: no floor
-        noise = jnp.asarray(noise, jnp.float64)
-        if noise.ndim > 1 or (noise.ndim == 1 and noise.shape[0] != points.shape[0]):
-            raise ValueError(f"noise must be one floor (px) per outline, shape ({points.shape[0]},), or one number; "
-                             f"got shape {noise.shape}")
-        noise = jnp.broadcast_to(noise, points.shape[:1])
-        noise = jnp.where(noise > 0, noise, 0.0)
-    return points, valid, image_size, jnp.asarray(aspect, jnp.float64), noise
+    V = points.shape[0]
+    noise = _per_view(noise, V, "noise", "one floor (px)")  # NaN or negative: no floor
+    noise_ell = _per_view(noise_ell, V, "noise_ell", "one correlation length (px)")  # NaN or <= 0: unknown
+    return points, valid, image_size, jnp.asarray(aspect, jnp.float64), noise, noise_ell
 
 
 def calibrate_homologies(points: Float[Array, "V M 2"], homs: ViewHomologies, method: str = "bundle", aspect=jnp.nan,
                          *, options: Options = Options(), image_size=None, valid=None,
-                         distortion: str = "none", fixed=None, noise=None) -> CoreResult:
+                         distortion: str = "none", fixed=None, noise=None, noise_ell=None) -> CoreResult:
     """:func:`calibrate` from per-view homologies already fitted (pixels)."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}; got {method!r}")
@@ -257,9 +272,9 @@ def calibrate_homologies(points: Float[Array, "V M 2"], homs: ViewHomologies, me
     if fixed is not None and method != "bundle":
         raise ValueError(f"fixed intrinsics are held by the bundle only; got method={method!r}")
     fixed = _check_fixed(fixed)
-    points, valid, image_size, aspect, noise = _check(points, valid, image_size, aspect, noise)
+    points, valid, image_size, aspect, noise, noise_ell = _check(points, valid, image_size, aspect, noise, noise_ell)
     homs = homs if noise is None else with_noise_floor(homs, noise, options)
-    c = _common(points, homs, valid, options, noise)
+    c = _common(points, homs, valid, options, noise, noise_ell)
     if distortion != "none":
         out, dist = _distorted(c, homs, aspect, options, distortion, fixed)
         return _finish(points, homs, c, method, aspect, image_size, options, bundle=(out, None), distortion=dist,
@@ -275,21 +290,21 @@ def calibrate_homologies(points: Float[Array, "V M 2"], homs: ViewHomologies, me
 
 def calibrate_methods(points: Float[Array, "V M 2"], homs: ViewHomologies, methods: tuple[str, ...], aspects,
                       *, options: Options = Options(), image_size=None, valid=None,
-                      fixed=None, noise=None) -> tuple[CoreResult, ...]:
+                      fixed=None, noise=None, noise_ell=None) -> tuple[CoreResult, ...]:
     """:func:`calibrate_homologies` for several ``methods`` (static tuple) with their
     ``aspects`` (one each, NaN: free) at once, as an experiment comparing estimators
     runs them: the bundles of every aspect model share one traced solver
     (``jax.lax.map`` over the aspects), and so do the linear methods' covariances.
     The same numbers as separate calls, a fraction of the compilation.  ``fixed``
     (intrinsics held fixed, px; None: none) applies to the bundle only: the linear
-    methods' results ignore it; ``noise`` as :func:`calibrate`'s."""
+    methods' results ignore it; ``noise`` and ``noise_ell`` as :func:`calibrate`'s."""
     for m in methods:
         if m not in METHODS:
             raise ValueError(f"method must be one of {METHODS}; got {m!r}")
-    points, valid, image_size, _, noise = _check(points, valid, image_size, jnp.nan, noise)
+    points, valid, image_size, _, noise, noise_ell = _check(points, valid, image_size, jnp.nan, noise, noise_ell)
     homs = homs if noise is None else with_noise_floor(homs, noise, options)
     aspects = jnp.asarray(aspects, jnp.float64).reshape(len(methods))
-    c = _common(points, homs, valid, options, noise)
+    c = _common(points, homs, valid, options, noise, noise_ell)
     ib = [i for i, m in enumerate(methods) if m == "bundle"]
     il = [i for i, m in enumerate(methods) if m != "bundle"]
     fixed = _check_fixed(fixed)

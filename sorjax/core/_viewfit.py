@@ -100,6 +100,9 @@ class ViewFit(eqx.Module):
         infinity_z: ``|v_3| / std(v_3)`` (first order, affine invariant).
         conic_rms: RMS Sampson distance of the outline from its best conic
             (normalised units).
+        noise_ell: the correlation length along the curve (px) of the outline's noise,
+            as the noise model behind ``infinity_z`` read it off the residuals
+            (:func:`sorjax._noise.estimate_noise`).
     """
 
     v: Float[Array, "3"]
@@ -113,6 +116,7 @@ class ViewFit(eqx.Module):
     inliers: Bool[Array, " N"]
     infinity_z: Float[Array, ""]
     conic_rms: Float[Array, ""]
+    noise_ell: Float[Array, ""]
 
 
 class ViewHomologies(eqx.Module):
@@ -123,7 +127,9 @@ class ViewHomologies(eqx.Module):
     (px) and ``cost`` (px^2) over the kept samples; ``rms_untrimmed`` (px) of the fit
     to all samples; ``conic_rms`` (px); ``trimmed`` fraction of the samples;
     ``at_infinity``: ``|v_x[2]| < 1e-9`` or ``infinity_z < options.infinity_z``;
-    ``is_conic``: ``conic_rms <= conic_ratio * rms + conic_floor_px``."""
+    ``is_conic``: ``conic_rms <= conic_ratio * rms + conic_floor_px``; ``noise_ell`` (px)
+    the correlation length of the outline's noise read off the residuals
+    (:attr:`ViewFit.noise_ell`)."""
 
     v_x: Float[Array, "3"]
     l_s: Float[Array, "3"]
@@ -139,6 +145,7 @@ class ViewHomologies(eqx.Module):
     converged: Bool[Array, ""]
     steps: Int[Array, ""]
     inliers: Bool[Array, " N"]
+    noise_ell: Float[Array, ""]
 
 
 # ---------------------------------------------------------------- parameters
@@ -445,12 +452,12 @@ def _outliers(r_px, active, keep, options: Options):
 
 
 def _infinity_z(field, samples, weights, v, l, feet, scale, options: Options):
-    """``|v_3| / std(v_3)`` of eq. 20's fit at ``(v, l)`` in a chart centred there
+    """``(z, ell)``: ``z = |v_3| / std(v_3)`` of eq. 20's fit at ``(v, l)`` in a chart centred there
     (``feet``: the closest-point parameters at ``(v, l)``; ``scale`` px per unit).
     The covariance is the sandwich of :func:`sorjax._bundle.covariance` for one view:
     the Jacobian read off the outline smoothed by ``options.covariance_smooth_px``,
     the residuals' covariance from the outline noise model of :mod:`sorjax._noise`
-    (level and correlation length from the residuals).  With ``s^2 (J^T J)^-1``
+    (level and correlation length ``ell`` px from the residuals).  With ``s^2 (J^T J)^-1``
     instead, ``v_x``'s standard error came out about 1.6x too small on the paper's
     noise, so that views looking almost straight at the axis passed as finite
     ``v_x`` and gave a confidently wrong focal length from one view (issue 18:
@@ -468,7 +475,7 @@ def _infinity_z(field, samples, weights, v, l, feet, scale, options: Options):
     A = jnp.linalg.pinv(Js.T @ Js, hermitian=True)
     cov = A @ (level * noise_meat(Js, unit_blocks(geo, ell))) @ A
     var3 = E[2] @ cov[2:, 2:] @ E[2]
-    return jnp.abs(v[2]) / jnp.sqrt(jnp.maximum(var3, 1e-300))
+    return jnp.abs(v[2]) / jnp.sqrt(jnp.maximum(var3, 1e-300)), ell[0]
 
 
 # ------------------------------------------------------------------- the fit
@@ -532,10 +539,10 @@ def fit_view(field: DistanceField, samples: Float[Array, "N 2"], weights: Float[
               jnp.asarray(True), steps0[k], zero)
     _, _, fit, keep, _, _, steps, cost_all = jax.lax.while_loop(cond, body, init_c)
     w = weights * keep
-    z = _infinity_z(field, samples, w, fit.v, fit.l, fit.feet, scale, options)
+    z, ell = _infinity_z(field, samples, w, fit.v, fit.l, fit.feet, scale, options)
     l = fit.l / jnp.linalg.norm(fit.l[:2])
     return ViewFit(fit.v / jnp.linalg.norm(fit.v), l, fit.cost, jnp.sum(w), cost_all, n_all, fit.ok,
-                   steps, keep, z, conic_rms)
+                   steps, keep, z, conic_rms, ell)
 
 
 def fit_views(views: Views, options: Options = Options(), init=None, sequential: bool = False) -> ViewFit:
@@ -573,7 +580,7 @@ def pixel_homology(fit: ViewFit, T: Float[Array, "3 3"], options: Options = Opti
         rms_untrimmed=jnp.sqrt(fit.cost_untrimmed / jnp.maximum(fit.n_untrimmed, 1.0)) * scale,
         conic_rms=conic, trimmed=jnp.mean((~fit.inliers).astype(jnp.float64)), infinity_z=fit.infinity_z,
         at_infinity=_at_infinity(v, fit.infinity_z, options), is_conic=_is_conic(conic, rms, options),
-        converged=fit.converged, steps=fit.steps, inliers=fit.inliers,
+        converged=fit.converged, steps=fit.steps, inliers=fit.inliers, noise_ell=fit.noise_ell,
     )
 
 
