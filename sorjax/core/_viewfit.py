@@ -600,7 +600,15 @@ def with_noise_floor(homs: ViewHomologies, noise, options: Options = Options()) 
     ``at_infinity`` and ``is_conic`` decided again from it.  For outlines averaged with
     their own mirror image, whose residuals no longer show their noise
     (:attr:`sorjax._bundle.BundleProblem.noise`): their ``v_x`` would otherwise pass as
-    finite far too easily.  ``rms`` itself is left as fitted."""
+    finite far too easily.  ``rms`` itself is left as fitted.
+
+    The scaling keeps the noise's correlation length that the fit read off the
+    averaged outline's residuals (``noise_ell``), not the length of the noise behind
+    the floor: measured on the paper's noise (1 px, two spheres at f = 700 and 1400 px,
+    18 outlines), the scaled ``z`` was 0.95-1.85 times (median 1.4) the raw outline's own,
+    which errs towards a finite ``v_x``.  It decides only the only-principal-point
+    verdict (every view at infinity); the bundle's covariance takes the floor's own
+    length (:attr:`sorjax._bundle.BundleProblem.noise_ell`)."""
     noise = jnp.asarray(noise, jnp.float64)
     higher = noise > homs.rms
     z = homs.infinity_z * jnp.where(higher, homs.rms / jnp.where(higher, noise, 1.0), 1.0)
