@@ -1,7 +1,7 @@
 """Is the reported uncertainty right for outlines averaged with their own mirror image?
 
 Each trial puts the paper's noise (``scenes.paper_noise``, sigma px, smoothed along the
-curve) on the three outlines of ``scenes.two_spheres`` (f = 700 px) and calibrates
+curve) on the three outlines of ``scenes.two_spheres`` (f = 700 px, or ``--f``) and calibrates
 them three ways with the bundle (``outline_error=0``, as a synthetic study):
 
 * ``raw``: the noisy outlines;
@@ -49,14 +49,15 @@ def main(argv=None) -> None:
     p.add_argument("--trials", type=int, default=20)
     p.add_argument("--seed", type=int, default=1000, help="trial t uses numpy seed SEED + t")
     p.add_argument("--sigma", type=float, default=1.0, help="the paper's noise, px (default 1)")
+    p.add_argument("--f", type=float, default=700.0, help="the focal length, px (default 700)")
     a = p.parse_args(argv)
-    sc = scenes.two_spheres(f=700.0)
+    sc = scenes.two_spheres(f=a.f)
     K = np.asarray(sc.K)
     truth = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
     ways = ("raw", "averaged", "averaged + floor", "averaged + floor + ell")
     rows: dict[str, list] = {w: [] for w in ways}
     t0 = time.time()
-    print(f"noise floor check: two spheres, f 700 px, sigma {a.sigma:g} px, {a.trials} trials, seeds "
+    print(f"noise floor check: two spheres, f {a.f:g} px, sigma {a.sigma:g} px, {a.trials} trials, seeds "
           f"{a.seed}..{a.seed + a.trials - 1}")
     for t in range(a.trials):
         rng = np.random.default_rng(a.seed + t)
