@@ -81,7 +81,7 @@ def _first_line(text: str, n: int = 110) -> str:
     return t if len(t) <= n else t[: n - 3] + "..."
 
 
-_ATTRS = ("outline_error", "edge_contrast", "accepted", "symmetry_rms", "noise_rms", "noise_ell")
+from sorjax._outline_files import ATTRIBUTES as _ATTRS  # noqa: E402  (what sorjax.save_outlines keeps)
 
 
 def _extract(name: str, r: render.Rendering, store: str | None, stem: str, symmetric: bool = True):

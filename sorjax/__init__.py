@@ -13,6 +13,7 @@ from ._calibration import RESULTS, Calibration, CalibrationError, calibrate  # n
 from ._extract import outlines_from_image, outlines_from_mask  # noqa: E402
 from ._homology import Homology, fit_homology, homology_matrix  # noqa: E402
 from ._outline import Outline, make_outline  # noqa: E402
+from ._outline_files import load_outlines, save_outlines  # noqa: E402
 from ._uncertainty import ErrorPrediction, predicted_error  # noqa: E402
 from . import losses, render, scenes  # noqa: E402
 
@@ -26,11 +27,13 @@ __all__ = [
     "calibrate",
     "fit_homology",
     "homology_matrix",
+    "load_outlines",
     "losses",
     "make_outline",
     "outlines_from_image",
     "outlines_from_mask",
     "predicted_error",
     "render",
+    "save_outlines",
     "scenes",
 ]

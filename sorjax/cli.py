@@ -3,7 +3,9 @@
 
 ``sorjax calibrate`` takes photographs (objects found automatically, or inside
 ``--boxes``, or given by ``--masks``; each object one view) or outline files (one
-outline per file: ``.npy``, or text with two columns ``x y`` in pixels), calibrates,
+outline per file: ``.npy``, or text with two columns ``x y`` in pixels; or ``.npz``
+files of :func:`sorjax.save_outlines`, several outlines each with their error
+attributes), calibrates,
 prints K with its standard deviations and a per-view table, and with ``--out`` writes
 an OpenCV YAML, a JSON twin and overlay images.  Errors in the input are reported in one line with
 exit code 2, never a traceback; an image that gives no outline is dropped with a one-line warning and
@@ -27,15 +29,21 @@ from pathlib import Path
 import numpy as np
 
 
-def _read_outline(path: str) -> np.ndarray:
+def _read_outlines(path: str) -> list[np.ndarray]:
+    """The outlines of one outline file: one from ``.npy`` or text, every one of a
+    :func:`sorjax.save_outlines` ``.npz`` (with their attributes)."""
     p = Path(path)
     if not p.is_file():
         raise ValueError(f"{path}: no such file")
+    if p.suffix == ".npz":
+        from ._outline_files import load_outlines
+
+        return load_outlines(p)
     try:
         if p.suffix == ".npy":
-            return np.load(p)
+            return [np.load(p)]
         delim = "," if p.suffix == ".csv" else None
-        return np.loadtxt(p, delimiter=delim, ndmin=2)
+        return [np.loadtxt(p, delimiter=delim, ndmin=2)]
     except Exception as e:  # unreadable files are the user's to fix
         raise ValueError(f"{path}: could not read an (N, 2) array of pixel coordinates ({e})") from None
 
@@ -378,7 +386,7 @@ def _calibrate(args) -> int:
 
     is_image = [Path(f).suffix.lower() in IMAGE_SUFFIXES for f in args.outlines]
     if any(is_image) and not all(is_image):
-        raise ValueError("give either images or outline files (.npy/.txt/.csv), not both")
+        raise ValueError("give either images or outline files (.npy/.txt/.csv/.npz), not both")
     if not any(is_image) and (args.masks or args.boxes):
         raise ValueError("--masks and --boxes go with images")
     labels = _labels(args.outlines)
@@ -386,8 +394,9 @@ def _calibrate(args) -> int:
     if any(is_image):
         outlines, sources, images, size, dropped_images = _views_from_images(args, labels)
     else:
-        outlines = [_read_outline(f) for f in args.outlines]
-        sources = list(labels)
+        read = [_read_outlines(f) for f in args.outlines]
+        outlines = [o for got in read for o in got]
+        sources = [lab if len(got) == 1 else f"{lab}#{j}" for lab, got in zip(labels, read) for j in range(len(got))]
         images, size, dropped_images = [], None, []
     print(f"{len(outlines)} outline(s) from {len(args.outlines)} file(s)"
           + (f" ({len(dropped_images)} image(s) gave none and were dropped)" if dropped_images else ""))
@@ -399,8 +408,9 @@ def _calibrate(args) -> int:
                          f"warnings); calibration needs at least {'one' if need == 1 else 'two'}. Add images, or "
                          "give boxes (--boxes) or masks (--masks) for the objects")
     outline_error = args.outline_error
-    if outline_error is None:  # photographs: their outlines' quality is measured; masks and files: the default
-        outline_error = "measured" if any(is_image) and not args.masks else 0.1
+    if outline_error is None:  # photographs (and saved image outlines): measured; masks and plain files: the default
+        measured = any(np.isfinite(getattr(o, "outline_error", np.nan)) for o in outlines)
+        outline_error = "measured" if (any(is_image) and not args.masks) or measured else 0.1
     principal_point = args.principal_point
     if args.centre_principal_point:
         if size is None:
@@ -522,7 +532,8 @@ def main(argv=None) -> int:
     sub = p.add_subparsers(dest="cmd", required=True)
     c = sub.add_parser("calibrate", help="calibrate from photographs (or masks) of SORs, or from outline files")
     c.add_argument("outlines", nargs="+", metavar="FILE",
-                   help="images (.png, .jpg, ...) or outline files (.npy, or text with x y columns)")
+                   help="images (.png, .jpg, ...) or outline files (.npy, or text with x y columns, or .npz of "
+                        "sorjax.save_outlines)")
     c.add_argument("--masks", nargs="+", default=None, help="one mask per image (binary, soft or label image)")
     c.add_argument("--boxes", default=None, help="JSON: {image file name: [[x0, y0, x1, y1], ...]}")
     c.add_argument("--out", default=None, help="camera.yaml to write (OpenCV FileStorage, plus a .json twin and "

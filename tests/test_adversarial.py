@@ -146,7 +146,7 @@ def test_out_that_cannot_be_written_is_refused_before_any_work(tmp_path, capsys,
     np.save(tmp_path / "a.npy", o[0])
     np.save(tmp_path / "b.npy", o[1])
     monkeypatch.setattr(sorjax, "calibrate", _Never("the calibration"))
-    monkeypatch.setattr("sorjax.cli._read_outline", _Never("reading the outlines"))
+    monkeypatch.setattr("sorjax.cli._read_outlines", _Never("reading the outlines"))
     assert main(["calibrate", "a.npy", "b.npy", "--out", where]) == 2
     _one_line_error(capsys.readouterr().err, *words)
     assert _tree(tmp_path) == {"afile", "a.npy", "b.npy"}

@@ -158,3 +158,58 @@ def test_cli_drops_images_and_boxes_that_give_no_outline(tmp_path, capsys):
     assert main(["calibrate", imgs[0], str(blank), "--boxes", str(tmp_path / "one.json")]) == 2
     err = capsys.readouterr().err
     assert "too few views left: 0 outline(s) from 0 image(s) after 2 of 2 gave none (img0.png, blank.png" in err
+
+
+def test_saved_outlines_keep_their_attributes_and_calibrate_as_before(tmp_path, capsys):
+    """sorjax.save_outlines / load_outlines keep an image outline's attributes (np.save
+    drops them); ``sorjax calibrate FILE.npz`` reads them: the outlines averaged with their
+    mirror image calibrate with the outline error measured and their noise floors, the same
+    K and standard deviations as from the arrays in memory, not as noise-free plain arrays."""
+    import json
+    import math
+
+    import pytest
+
+    import sorjax
+    from sorjax._detect import DetectOptions, ImageOutline, outline_homology, symmetric_average
+
+    sc = scenes.two_spheres(f=700.0)
+    outs = []
+    for i, o in enumerate(sc.outlines):
+        raw = np.asarray(scenes.paper_noise(o, 0.1, 40 + i))
+        h = outline_homology(raw)
+        avg = symmetric_average(raw, h.W, np.ones(len(raw), bool), DetectOptions())
+        outs.append(ImageOutline(avg, outline_error=float(h.rms), symmetry_rms=float(h.rms),
+                                 noise_rms=float(h.rms), noise_ell=float(h.noise_ell)))
+    plain = np.asarray(sc.outlines[0])
+    path = sorjax.save_outlines(tmp_path / "outs", [*outs, plain])
+    assert path.endswith(".npz")
+    back = sorjax.load_outlines(path)
+    assert len(back) == 4
+    for a, b in zip(outs, back):
+        np.testing.assert_array_equal(np.asarray(b), np.asarray(a))
+        for k in ("outline_error", "noise_rms", "noise_ell"):
+            assert getattr(b, k) == getattr(a, k)
+    assert math.isnan(back[3].noise_rms) and math.isnan(back[3].outline_error)
+    # the command line on the file: as the arrays in memory (measured outline error, floors)
+    sorjax.save_outlines(tmp_path / "three.npz", outs)
+    want = sorjax.calibrate(outs, outline_error="measured")
+    assert want.success
+    assert main(["calibrate", str(tmp_path / "three.npz"), "--out", str(tmp_path / "cam.yaml")]) == 0
+    js = json.loads((tmp_path / "cam.json").read_text())
+    np.testing.assert_allclose(js["camera_matrix"], np.asarray(want.K), rtol=1e-9)
+    got_std = [js["intrinsics_std"][k] for k in ("fx", "fy", "cx", "cy")] if "fx" in js["intrinsics_std"] else \
+        list(js["intrinsics_std"].values())
+    np.testing.assert_allclose(np.asarray(got_std, float), np.asarray(want.std), rtol=1e-9)
+    # the same points as plain arrays are taken as noise-free outlines: another std
+    flat = sorjax.calibrate([np.asarray(o) for o in outs])
+    assert not np.allclose(np.asarray(flat.std), np.asarray(want.std), rtol=0.1)
+    # bad files: one line each
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="not an outline file written by sorjax.save_outlines"):
+        sorjax.load_outlines(tmp_path / "junk.npz")
+    np.savez(tmp_path / "other.npz", x=np.zeros(3))
+    assert main(["calibrate", str(tmp_path / "other.npz"), str(tmp_path / "three.npz")]) == 2
+    assert "not an outline file" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="outline 0"):
+        sorjax.save_outlines(tmp_path / "bad", [np.zeros((5, 3))])

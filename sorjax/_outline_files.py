@@ -1,0 +1,80 @@
+"""Outlines on disk with what the image said about them.
+
+An outline from a photograph (:func:`sorjax.outlines_from_image`) is a
+``sorjax._detect.ImageOutline``: an (N, 2) array in pixels carrying its estimated error
+(``outline_error``), its symmetry residual and, when it was averaged with its own mirror
+image, the noise that the averaged outline no longer shows (``noise_rms``, ``noise_ell``).
+:func:`sorjax.calibrate` reads those attributes; ``np.save`` drops them, and an averaged
+outline saved as a plain array then reads as a noise-free one.  :func:`save_outlines`
+keeps them in one ``.npz`` file, which :func:`load_outlines` and ``sorjax calibrate
+FILE.npz`` read back.
+
+The file holds ``points_0``, ``points_1``, ... ((N_k, 2) float64, px), ``attributes``
+((n, A) float64, NaN where an outline has none) and ``attribute_names`` ((A,) str).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Sequence
+
+import numpy as np
+
+from ._detect import ImageOutline
+
+#: the ImageOutline attributes a file keeps, in this order
+ATTRIBUTES = ("outline_error", "edge_contrast", "accepted", "symmetry_rms", "noise_rms", "noise_ell")
+
+
+def save_outlines(path, outlines: Sequence[np.ndarray]) -> str:
+    """Write ``outlines`` ((N_k, 2) arrays in pixels, ``ImageOutline`` or plain) with
+    their attributes (NaN where absent) to the ``.npz`` file ``path`` (the suffix is
+    added when missing); returns the path written.  Plain arrays keep only their points."""
+    arrays = {}
+    rows = []
+    for k, o in enumerate(outlines):
+        p = np.asarray(o, dtype=np.float64)
+        if p.ndim != 2 or p.shape[1] != 2 or p.shape[0] < 3:
+            raise ValueError(f"outline {k}: expected an (N, 2) array of pixel coordinates, N >= 3; got shape {p.shape}")
+        arrays[f"points_{k}"] = p
+        rows.append([_number(getattr(o, a, math.nan)) for a in ATTRIBUTES])
+    if not rows:
+        raise ValueError("no outlines to save")
+    path = os.fspath(path)
+    if not path.endswith(".npz"):
+        path += ".npz"
+    np.savez(path, attributes=np.array(rows, np.float64), attribute_names=np.array(ATTRIBUTES), **arrays)
+    return path
+
+
+def load_outlines(path) -> list[ImageOutline]:
+    """The outlines of a :func:`save_outlines` file, as ``ImageOutline`` arrays with
+    their attributes (NaN where none was saved).  A ValueError says what is wrong with a
+    file that is not one."""
+    what = f"{os.fspath(path)}: not an outline file written by sorjax.save_outlines"
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            names = [str(n) for n in z["attribute_names"]] if "attribute_names" in z else []
+            attrs = np.asarray(z["attributes"], np.float64) if "attributes" in z else np.zeros((0, 0))
+            n = sum(1 for key in z.files if key.startswith("points_"))
+            points = [np.asarray(z[f"points_{k}"], np.float64) for k in range(n)]
+    except (OSError, ValueError, KeyError) as e:
+        raise ValueError(f"{what} ({e})") from None
+    if n == 0 or attrs.shape != (n, len(names)):
+        raise ValueError(f"{what} (expected points_0 ... points_{{n-1}} and an (n, {len(names)}) attributes array)")
+    out = []
+    for k, p in enumerate(points):
+        if p.ndim != 2 or p.shape[1] != 2:
+            raise ValueError(f"{what} (points_{k} has shape {p.shape}, not (N, 2))")
+        kw = {a: float(attrs[k, names.index(a)]) for a in ATTRIBUTES if a in names}
+        out.append(ImageOutline(p, **kw))
+    return out
+
+
+def _number(x) -> float:
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return math.nan
+    return x if math.isfinite(x) else math.nan
