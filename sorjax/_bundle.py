@@ -530,7 +530,8 @@ def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Optio
     The sandwich ``F^-1 G^T Sigma_r G F^-1`` of least squares, with
     ``Sigma_r`` the residuals' covariance under the outline noise model of
     :mod:`sorjax._noise` (its level and correlation length estimated from the
-    residuals) and ``G`` the intrinsics' columns of the Jacobian with the per-view
+    residuals; where a view's noise floor binds, its floor's length,
+    :attr:`BundleProblem.noise_ell`) and ``G`` the intrinsics' columns of the Jacobian with the per-view
     pole-polar pairs' directions projected out, ``F = G^T G`` (the Schur complement
     ``J_k^T J_k - J_k^T J_a (J_a^T J_a)^-1 J_a^T J_k``: the information on the
     intrinsics ``k`` once the pairs ``a`` are fitted, whatever chart they are fitted

@@ -1099,7 +1099,8 @@ def calibrate(
             one off residuals that no longer show it: an averaged outline is smooth,
             and its residuals read as noise correlated over tens of pixels, which
             made the standard deviations about 4x too large
-            (``experiments/noise_floor.py``).
+            (``experiments/noise_floor.py``).  Without ``outline_noise`` (given or
+            read from the outlines) it has no effect.
         throw: raise :class:`CalibrationError` instead of returning a failed result.
 
     Returns:

@@ -31,6 +31,8 @@ def save_outlines(path, outlines: Sequence[np.ndarray]) -> str:
     """Write ``outlines`` ((N_k, 2) arrays in pixels, ``ImageOutline`` or plain) with
     their attributes (NaN where absent) to the ``.npz`` file ``path`` (the suffix is
     added when missing); returns the path written.  Plain arrays keep only their points."""
+    if isinstance(outlines, np.ndarray) and outlines.ndim == 2:
+        raise ValueError("save_outlines takes a list of outlines; got one (N, 2) array: pass [outline]")
     arrays = {}
     rows = []
     for k, o in enumerate(outlines):
@@ -54,15 +56,27 @@ def load_outlines(path) -> list[ImageOutline]:
     file that is not one."""
     what = f"{os.fspath(path)}: not an outline file written by sorjax.save_outlines"
     try:
-        with np.load(path, allow_pickle=False) as z:
-            names = [str(n) for n in z["attribute_names"]] if "attribute_names" in z else []
-            attrs = np.asarray(z["attributes"], np.float64) if "attributes" in z else np.zeros((0, 0))
+        z = np.load(path, allow_pickle=False)
+    except Exception:  # noqa: BLE001  (empty, truncated, text, pickled: the user's file to fix)
+        raise ValueError(f"{what} (not a .npz archive numpy can read)") from None
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        raise ValueError(f"{what} (a single array, not a .npz archive of outlines)")
+    try:
+        with z:
+            missing = [k for k in ("attribute_names", "attributes", "points_0") if k not in z.files]
+            if missing:
+                raise ValueError(f"{what} (no {', '.join(missing)} in it)")
+            names = [str(n) for n in z["attribute_names"]]
+            attrs = np.asarray(z["attributes"], np.float64)
             n = sum(1 for key in z.files if key.startswith("points_"))
             points = [np.asarray(z[f"points_{k}"], np.float64) for k in range(n)]
-    except (OSError, ValueError, KeyError) as e:
-        raise ValueError(f"{what} ({e})") from None
-    if n == 0 or attrs.shape != (n, len(names)):
-        raise ValueError(f"{what} (expected points_0 ... points_{{n-1}} and an (n, {len(names)}) attributes array)")
+    except ValueError:
+        raise
+    except Exception as e:  # noqa: BLE001
+        raise ValueError(f"{what} ({type(e).__name__}: {e})") from None
+    if attrs.shape != (n, len(names)):
+        raise ValueError(f"{what} ({n} outlines but an attributes array of shape {attrs.shape}, "
+                         f"not ({n}, {len(names)}))")
     out = []
     for k, p in enumerate(points):
         if p.ndim != 2 or p.shape[1] != 2:

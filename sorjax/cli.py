@@ -9,8 +9,10 @@ attributes), calibrates,
 prints K with its standard deviations and a per-view table, and with ``--out`` writes
 an OpenCV YAML, a JSON twin and overlay images.  Errors in the input are reported in one line with
 exit code 2, never a traceback; an image that gives no outline is dropped with a one-line warning and
-the run goes on with the others.  Outlines found in photographs (no ``--masks``) are calibrated with
-the outline error measured from their symmetry residuals (``calibrate(outline_error="measured")``).
+the run goes on with the others.  Outlines found in photographs (no ``--masks``), and outline files
+of :func:`sorjax.save_outlines` whose outlines carry an ``outline_error`` (every outline of the run
+then), are calibrated with the outline error measured from the outlines
+(``calibrate(outline_error="measured")``).
 
 Outputs are safe: every file to write is checked before any work (its folder exists
 or can be created and is writable, it is not one of the inputs), each is written to a
@@ -35,14 +37,14 @@ def _read_outlines(path: str) -> list[np.ndarray]:
     p = Path(path)
     if not p.is_file():
         raise ValueError(f"{path}: no such file")
-    if p.suffix == ".npz":
+    if p.suffix.lower() == ".npz":
         from ._outline_files import load_outlines
 
         return load_outlines(p)
     try:
-        if p.suffix == ".npy":
+        if p.suffix.lower() == ".npy":
             return [np.load(p)]
-        delim = "," if p.suffix == ".csv" else None
+        delim = "," if p.suffix.lower() == ".csv" else None
         return [np.loadtxt(p, delimiter=delim, ndmin=2)]
     except Exception as e:  # unreadable files are the user's to fix
         raise ValueError(f"{path}: could not read an (N, 2) array of pixel coordinates ({e})") from None
@@ -558,8 +560,9 @@ def main(argv=None) -> int:
                    help="systematic error of the outlines in px that their symmetry does not show "
                         "(segmentation, lens distortion); the outlines must show 3x this much perspective "
                         "for the focal length to count as determined. 'measured': the RMS of the views' "
-                        "symmetry residuals, at least 0.1 px (the default for photographs without --masks; "
-                        "otherwise the default is 0.1; 0 for exact outlines)")
+                        "symmetry residuals, at least 0.1 px (the default for photographs without --masks "
+                        "and for .npz outline files whose outlines carry an outline_error; otherwise the "
+                        "default is 0.1; 0 for exact outlines)")
     c.set_defaults(func=_calibrate)
     e = sub.add_parser("experiment", help="run an experiment config (configs/*.toml)")
     e.add_argument("config", help="a TOML config file, or the name of one in configs/ (e.g. table1-quick)")

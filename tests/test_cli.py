@@ -213,3 +213,16 @@ def test_saved_outlines_keep_their_attributes_and_calibrate_as_before(tmp_path, 
     assert "not an outline file" in capsys.readouterr().err
     with pytest.raises(ValueError, match="outline 0"):
         sorjax.save_outlines(tmp_path / "bad", [np.zeros((5, 3))])
+    with pytest.raises(ValueError, match="pass \\[outline\\]"):
+        sorjax.save_outlines(tmp_path / "bad", np.zeros((5, 2)))
+    # empty, truncated, a renamed .npy, text: one line each, never a traceback
+    good = (tmp_path / "three.npz").read_bytes()
+    np.save(tmp_path / "arr.npy", np.zeros((5, 2)))
+    for name, data in (("empty.npz", b""), ("cut.npz", good[: len(good) // 2]),
+                       ("renamed.npz", (tmp_path / "arr.npy").read_bytes()), ("text.NPZ", b"1 2\n3 4\n")):
+        (tmp_path / name).write_bytes(data)
+        with pytest.raises(ValueError, match="not an outline file written by sorjax.save_outlines"):
+            sorjax.load_outlines(tmp_path / name)
+        assert main(["calibrate", str(tmp_path / name), str(tmp_path / "three.npz")]) == 2
+        err = capsys.readouterr().err
+        assert "not an outline file" in err and "Traceback" not in err

@@ -84,7 +84,8 @@ def calibrate(points: Float[Array, "V M 2"], method: str = "bundle", aspect=jnp.
             it was averaged; 0 or NaN: unknown), or None.  Where a floor binds, the
             covariance takes this as the view's noise correlation length instead of
             reading one off residuals that no longer show the noise
-            (:attr:`sorjax._bundle.BundleProblem.noise_ell`).
+            (:attr:`sorjax._bundle.BundleProblem.noise_ell`).  Without ``noise`` no
+            floor binds, and it has no effect.
     """
     homs = fit_homologies(points, options)
     return calibrate_homologies(points, homs, method, aspect, options=options, image_size=image_size, valid=valid,
@@ -238,7 +239,7 @@ def views_needed(aspect, fixed=None):
 
 
 def _per_view(x, n: int, name: str, what: str):
-    """``x`` (one number or (n,)) as (n,) float64 with NaN or negative entries 0, or
+    """``x`` (one number or (n,)) as (n,) float64 with NaN, infinite or negative entries 0, or
     None; a ValueError for any other shape."""
     if x is None:
         return None
@@ -246,7 +247,7 @@ def _per_view(x, n: int, name: str, what: str):
     if x.ndim > 1 or (x.ndim == 1 and x.shape[0] != n):
         raise ValueError(f"{name} must be {what} per outline, shape ({n},), or one number; got shape {x.shape}")
     x = jnp.broadcast_to(x, (n,))
-    return jnp.where(x > 0, x, 0.0)
+    return jnp.where(jnp.isfinite(x) & (x > 0), x, 0.0)
 
 
 def _check(points, valid, image_size, aspect, noise=None, noise_ell=None):

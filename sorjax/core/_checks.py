@@ -176,7 +176,7 @@ def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=N
     used.  ``fixed`` (4,): intrinsics held fixed (px, NaN: free; None: none), which
     the joint model then does not count among its parameters.  ``base``: the
     calibration's shared problem (:func:`sorjax._bundle.with_model`), or None (built).
-    ``ell``: the outline noise's correlation length (px), the bundle's
+    ``ell``: (V,) each view's outline noise correlation length (px), the bundle's
     :attr:`~sorjax._bundle.BundleOut.noise_ell`."""
     fixed_n = None if fixed is None else fixed_chart(fixed, T)
     problem = (make_problem(points_n, options.n_samples, aspect, inliers, used, fixed_n) if base is None
@@ -312,7 +312,7 @@ def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, opt
     ``G = J_r - J_h (J_h^T J_h)^+ J_h^T J_r``, ``g = G^T r`` (``= J_r^T r`` at the held
     model's optimum), ``S = g^T M^+ g`` with ``M = G^T Sigma_r G`` the outline noise
     model's ``Var(g)`` (:func:`sorjax._bundle.noise_blocks`, correlation length ``ell``
-    px), ``p = P(chi2_q > S)``;
+    px, one or (V,) one per view), ``p = P(chi2_q > S)``;
     the Gauss-Newton step of the released model ``-(J^T J)^+ J^T r`` gives ``shift``
     and ``released``.  No solve: one Jacobian."""
     nk = y[0].shape[0]
