@@ -19,7 +19,10 @@ them three ways with the bundle (``outline_error=0``, as a synthetic study):
 
 It prints, per way, the cameras calibrated, the RMS focal error, the median reported
 std and the RMS of ``z = error / std`` per intrinsic (1 when the std is right, below 1
-when it is too large).
+when it is too large); and, per outline, how ``core.with_noise_floor``'s ``infinity_z``
+of the averaged outline (the vertex's distance from the line at infinity in standard
+errors, scaled by ``rms / noise``) compares with the raw outline's own (it keeps the
+correlation length read off the averaged outline).
 
     python experiments/noise_floor.py --trials 20 --seed 1000
 """
@@ -33,15 +36,25 @@ import warnings
 import numpy as np
 
 import sorjax
-from sorjax import scenes
+from sorjax import core, scenes
+from sorjax._calibration import view_homologies
+from sorjax._homology import DEFAULT_SAMPLES
 from sorjax._detect import DetectOptions, outline_homology, symmetric_average
 
 
-def averaged(outline: np.ndarray, o: DetectOptions = DetectOptions()) -> tuple[np.ndarray, float, float]:
+def averaged(outline: np.ndarray, o: DetectOptions = DetectOptions()):
     """``outline`` averaged with its mirror image (all points confirmed), its symmetry
-    residual before the averaging and that noise's correlation length (px)."""
+    residual before the averaging, that noise's correlation length (px) and the raw
+    outline's ``infinity_z``."""
     h = outline_homology(outline)
-    return symmetric_average(outline, h.W, np.ones(len(outline), bool), o), float(h.rms), float(h.noise_ell)
+    avg = symmetric_average(outline, h.W, np.ones(len(outline), bool), o)
+    return avg, float(h.rms), float(h.noise_ell), float(h.infinity_z)
+
+
+def floored_z(outlines, noise) -> np.ndarray:
+    """``infinity_z`` of each outline's own fit under ``core.with_noise_floor``."""
+    homs = view_homologies([sorjax.fit_homology(q) for q in outlines], DEFAULT_SAMPLES)
+    return np.asarray(core.with_noise_floor(homs, np.asarray(noise)).infinity_z)
 
 
 def main(argv=None) -> None:
@@ -56,13 +69,15 @@ def main(argv=None) -> None:
     truth = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
     ways = ("raw", "averaged", "averaged + floor", "averaged + floor + ell")
     rows: dict[str, list] = {w: [] for w in ways}
+    z_ratio: list[float] = []
     t0 = time.time()
     print(f"noise floor check: two spheres, f {a.f:g} px, sigma {a.sigma:g} px, {a.trials} trials, seeds "
           f"{a.seed}..{a.seed + a.trials - 1}")
     for t in range(a.trials):
         rng = np.random.default_rng(a.seed + t)
         raw = [np.asarray(scenes.paper_noise(v, a.sigma, rng), np.float64) for v in sc.outlines]
-        avg, noise, ell = zip(*(averaged(q) for q in raw))
+        avg, noise, ell, z_raw = zip(*(averaged(q) for q in raw))
+        z_ratio += list(floored_z(avg, noise) / np.array(z_raw))
         for way, outs, kw in (("raw", raw, {}), ("averaged", list(avg), {}),
                               ("averaged + floor", list(avg), {"outline_noise": list(noise)}),
                               ("averaged + floor + ell", list(avg), {"outline_noise": list(noise),
@@ -82,6 +97,9 @@ def main(argv=None) -> None:
         f_err = np.sqrt(np.mean(err[ok][:, :2] ** 2)) if ok.any() else np.nan
         print(f"  {way:22s} calibrated {ok.sum():2d}/{len(ok)}  focal RMS error {f_err:6.2f} px  median std "
               f"{np.median(std[:, :2]):6.2f} px  rms z (fu fv u0 v0) " + " ".join(f"{v:.2f}" for v in z))
+    q = np.percentile(z_ratio, [0, 50, 100])
+    print(f"  infinity_z of the averaged outlines under the floor / the raw outlines' own, {len(z_ratio)} outlines: "
+          f"min {q[0]:.2f}  median {q[1]:.2f}  max {q[2]:.2f}")
 
 
 if __name__ == "__main__":

@@ -605,7 +605,8 @@ def with_noise_floor(homs: ViewHomologies, noise, options: Options = Options()) 
     The scaling keeps the noise's correlation length that the fit read off the
     averaged outline's residuals (``noise_ell``), not the length of the noise behind
     the floor: measured on the paper's noise (1 px, two spheres at f = 700 and 1400 px,
-    18 outlines), the scaled ``z`` was 0.95-1.85 times (median 1.4) the raw outline's own,
+    18 outlines; ``experiments/noise_floor.py``), the scaled ``z`` was 0.94-1.86 times
+    (median 1.4) the raw outline's own,
     which errs towards a finite ``v_x``.  It decides only the only-principal-point
     verdict (every view at infinity); the bundle's covariance takes the floor's own
     length (:attr:`sorjax._bundle.BundleProblem.noise_ell`)."""
