@@ -223,6 +223,9 @@ class ImageOutline(np.ndarray):
     noise_rms: float
     noise_ell: float
 
+    #: the attributes above, in order (what :func:`sorjax.save_outlines` keeps)
+    ATTRIBUTES = ("outline_error", "edge_contrast", "accepted", "symmetry_rms", "noise_rms", "noise_ell")
+
     def __new__(cls, points, *, outline_error=math.nan, edge_contrast=math.nan, accepted=math.nan,
                 symmetry_rms=math.nan, noise_rms=math.nan, noise_ell=math.nan):
         obj = np.asarray(points, dtype=np.float64).view(cls)
@@ -235,7 +238,7 @@ class ImageOutline(np.ndarray):
         return obj
 
     def __array_finalize__(self, obj):
-        for k in ("outline_error", "edge_contrast", "accepted", "symmetry_rms", "noise_rms", "noise_ell"):
+        for k in self.ATTRIBUTES:
             setattr(self, k, getattr(obj, k, math.nan))
 
     def __reduce__(self):  # pickles (worker processes) keep the attributes

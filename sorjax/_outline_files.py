@@ -24,7 +24,7 @@ import numpy as np
 from ._detect import ImageOutline
 
 #: the ImageOutline attributes a file keeps, in this order
-ATTRIBUTES = ("outline_error", "edge_contrast", "accepted", "symmetry_rms", "noise_rms", "noise_ell")
+ATTRIBUTES = ImageOutline.ATTRIBUTES
 
 
 def save_outlines(path, outlines: Sequence[np.ndarray]) -> str:

@@ -109,6 +109,20 @@ def test_a_binding_floor_with_its_own_length_sets_that_views_length():
     np.testing.assert_allclose(ell, ell_d, rtol=1e-12)
     assert float(level) == pytest.approx(level_d, rel=1e-9)
     assert float(ell[1]) == pytest.approx(1.7, rel=0.1) and float(ell[0]) == float(ell[2])
+    # by transformation: vmap over floors equals one call each; the level's gradient in
+    # the residuals matches central finite differences (view 1 held at its floor)
+    floors = jnp.stack([floor, jnp.zeros(V)])
+    ell_b, level_b = jax.jit(jax.vmap(lambda f: nz.estimate_noise(geo, r, J, 0.25, 32.0, f, fell)))(floors)
+    for k in range(2):
+        e_k, l_k = nz.estimate_noise(geo, r, J, 0.25, 32.0, floors[k], fell)
+        np.testing.assert_array_equal(ell_b[k], e_k)
+        assert float(level_b[k]) == pytest.approx(float(l_k), rel=1e-12)
+    lev = lambda r_: nz.estimate_noise(geo, r_, J, 0.25, 32.0, floor, fell)[1]  # noqa: E731
+    g = jax.grad(lev)(r)
+    assert np.all(np.isfinite(np.asarray(g))) and float(jnp.max(jnp.abs(g[1]))) == 0.0
+    d = jnp.asarray(rng.normal(size=r.shape)) * 1e-3
+    fd = (float(lev(r + d)) - float(lev(r - d))) / 2.0
+    assert float(jnp.sum(g * d)) == pytest.approx(fd, rel=1e-5)
     # no floor at all: as without the arguments; floors that never bind: the same
     for f, e in ((None, None), (jnp.zeros(V), fell), (0.1 * jnp.asarray(rss), jnp.full(V, 2.0))):
         ell2, level2 = est(geo, r, J, 0.25, 32.0, f, e)
