@@ -26,7 +26,7 @@ from ._checks import check_sizes
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
 from ._outline import BINARY_MASK_PX, DEFAULT_POINTS, PIXEL_TRACE_NOTE, _as_outlines, implied_outline_error, jagged_note
 from .core._assess import (ASYMMETRIC, COLLAPSED_FOCAL, CONIC, DUPLICATE, MASKED, PP_OUTSIDE, TRIMMED, USED, WIDE_FOV,
-                           outline_radius, view_verdicts)
+                           axes_intersection, outline_radius, view_verdicts)
 from .core._checks import (CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, CULPRIT_VIEWS, MODEL_WIDENED,
                            ModelChecks)
 from .core._calibrate import _intrinsics, calibrate_homologies
@@ -661,16 +661,33 @@ def details_for(r, h, points, method: str, a, outline_error: float, image_size=N
                 "principal point, or the camera looking straight at its axis). The pole-polar relation "
                 "omega v_x ~ l_s then holds for every focal length, so the focal length is not determined. Add "
                 "(or use instead) a view with the object away from the principal point, seen from above or below.")
-    if bool(r.all_at_infinity) and name in ("only_principal_point", "degenerate") and not np.any(r.determined):
+    if bool(r.all_at_infinity) and name in ("only_principal_point", "degenerate") and not np.any(
+            np.asarray(r.determined)[:2]):
         K = np.asarray(r.K)
-        if not np.all(np.isfinite(K[:2, 2])):
+        if np.all(np.isfinite(K[:2, 2])):
+            sd = np.sqrt(np.diag(np.asarray(r.covariance))[2:])
+            return (f"Every view's v_x is at infinity (views {vs}): the imaged axes meet at the principal "
+                    f"point ({_fmt_std(K[0, 2], sd[0])}, {_fmt_std(K[1, 2], sd[1])}) px; the focal length is not "
+                    "determined.")
+        pp, cov_pp, spread = (np.asarray(a) for a in axes_intersection(jnp.asarray(r.l_s), jnp.asarray(r.used)))
+        if not np.all(np.isfinite(pp)):
             return (f"Every view's v_x is at infinity (views {vs}) and their imaged axes are parallel "
-                    f"(within {float(r.axes_spread_deg):.2g} deg), so not even the principal point is determined. "
+                    f"(within {float(spread):.2g} deg), so not even the principal point is determined. "
                     "Add a view with the object away from the image centre.")
-        sd = np.sqrt(np.diag(np.asarray(r.covariance))[2:])
-        return (f"Every view's v_x is at infinity (views {vs}): the imaged axes meet at the principal "
-                f"point ({_fmt_std(K[0, 2], sd[0])}, {_fmt_std(K[1, 2], sd[1])}) px; the focal length is not "
-                "determined.")
+        sd = np.sqrt(np.abs(np.diag(cov_pp)))
+        if not np.all(np.isfinite(sd)):
+            why = (f"only {len(used)} imaged axes, which always meet: with fewer than three the views cannot show "
+                   "the error of their meeting point")
+        else:
+            why = f"their meeting point is uncertain by ({sd[0]:.3g}, {sd[1]:.3g}) px"
+        if image_size is not None and np.all(np.isfinite(image_size)):
+            w, h = float(image_size[0]), float(image_size[1])
+            if not (-0.5 <= pp[0] <= w - 0.5 and -0.5 <= pp[1] <= h - 0.5):
+                why += f", and it lies outside the {w:.0f} x {h:.0f} image"
+        return (f"Every view's v_x is at infinity (views {vs}): the imaged axes meet at ({pp[0]:.1f}, {pp[1]:.1f}) "
+                f"px, which is not reported as the principal point: {why}. Neither the focal length nor the "
+                "principal point is determined. Add views with the object away from the image centre, seen from "
+                "above or below.")
     det = np.asarray(r.determined)
     if name in ("only_principal_point", "degenerate") and not det.all() and np.all(np.isfinite(np.asarray(r.K_raw))):
         Kr = np.asarray(r.K_raw)
@@ -1120,7 +1137,11 @@ def calibrate(
     * when, in addition, every view's ``v_x`` is at infinity
       (:attr:`Homology.v_x_at_infinity`) -- or the estimate failed -- only the principal
       point is estimable: ``RESULTS.only_principal_point`` with the least-squares
-      intersection of the ``l_s`` in ``K[:2, 2]`` and NaN focal lengths;
+      intersection of the ``l_s`` in ``K[:2, 2]`` and NaN focal lengths, when three
+      axes or more fix it (two always meet: their meeting point cannot show its own
+      error), its standard deviations are at most a third of the outlines' RMS radius
+      and it lies inside the image (``image_size``); else ``RESULTS.degenerate`` with
+      K all NaN and the meeting point named in the message;
     * the bundle's focal length is not determined when the outlines show too little
       perspective (``outline_error``): the best camera with no perspective must fit
       them clearly worse, beyond their noise and their systematic error;

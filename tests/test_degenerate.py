@@ -5,6 +5,8 @@ the ground truth."""
 import math
 import warnings
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -122,6 +124,49 @@ def test_every_vx_at_infinity_gives_only_the_principal_point(at_infinity, good, 
     assert "principal point" in cal.message and "views 0, 1, 2" in cal.message
     with pytest.raises(sorjax.CalibrationError, match="not the focal length"):
         sorjax.calibrate(sc.outlines, method=method, homologies=homs, throw=True)
+
+
+def test_two_imaged_axes_do_not_determine_the_principal_point(at_infinity):
+    """Two views with v_x at infinity: their imaged axes always meet, so the meeting
+    point cannot show its own error and is not reported as the principal point (a
+    photo set's two poor outlines put it 3800 px below a 768 px image, reported as
+    determined before); three views report it (above)."""
+    sc, homs = at_infinity
+    cal = sorjax.calibrate(sc.outlines[:2], homologies=homs[:2], image_size=(640, HEIGHT))
+    assert cal.result == sorjax.RESULTS.degenerate and not cal.success
+    assert np.isnan(np.asarray(cal.K)).all()
+    # the meeting point is named in the message, with why it is not reported
+    assert "not reported as the principal point" in cal.message and "only 2 imaged axes" in cal.message
+    assert f"({K_TRUE[0, 2]:.1f}, {K_TRUE[1, 2]:.1f})" in cal.message
+    three = sorjax.calibrate(sc.outlines, homologies=homs, image_size=(640, HEIGHT))
+    assert three.result == sorjax.RESULTS.only_principal_point
+    np.testing.assert_allclose(three.principal_point, K_TRUE[:2, 2], atol=1e-4)
+
+
+def test_a_principal_point_outside_the_image_is_not_reported(at_infinity):
+    """Three views with v_x at infinity whose axes meet outside the image (the image
+    given smaller than the camera's): not a plausible principal point, not reported."""
+    sc, homs = at_infinity
+    small = (200, 150)  # the true principal point (330, 250) lies outside it
+    cal = sorjax.calibrate(sc.outlines, homologies=homs, image_size=small)
+    assert cal.result == sorjax.RESULTS.degenerate and np.isnan(np.asarray(cal.K)).all()
+    assert "outside the 200 x 150 image" in cal.message
+
+
+def test_the_core_reports_the_principal_point_only_where_determined(at_infinity):
+    """The core's ``determined`` flags agree with the finite entries of ``K`` in the
+    principal-point-only case, under jit as eagerly."""
+    from sorjax import core
+
+    sc, homs = at_infinity
+    pts = np.stack([np.asarray(o)[np.linspace(0, len(o), 400, endpoint=False).astype(int)] for o in sc.outlines])
+    for n in (2, 3):
+        r = jax.jit(lambda p: core.calibrate(p, image_size=jnp.array([640.0, HEIGHT])))(jnp.asarray(pts[:n]))
+        K = np.asarray(r.K)
+        det = np.asarray(r.determined)
+        assert not det[:2].any()
+        assert det[2] == det[3] == (n == 3)
+        np.testing.assert_array_equal(np.isfinite([K[0, 2], K[1, 2]]), det[2:])
 
 
 def test_every_vx_at_infinity_with_noise(at_infinity):

@@ -142,6 +142,22 @@ def axis_spread_deg(ls: Float[Array, "V 3"], used: Bool[Array, " V"]) -> Float[A
     return jnp.degrees(jnp.max(jnp.where(used[:, None] & used[None, :], d, 0.0)))
 
 
+def principal_point_determined(pp, cov_pp, radius, image_size, options: Options) -> Bool[Array, ""]:
+    """Whether the principal point ``pp`` (2,) px where the imaged axes meet (every
+    ``v_x`` at infinity; :func:`axes_intersection`) counts as determined: its covariance
+    ``cov_pp`` (2, 2) px^2 is finite (three axes or more: two lines always meet, so two
+    views cannot show their own error), its standard deviations are at most
+    ``undetermined`` times the outlines' RMS ``radius`` (px; as :func:`assess` judges a
+    principal point without a focal length) and, with ``image_size = (width, height)``
+    known, it lies inside the image (:func:`implausible`'s test)."""
+    sd = jnp.sqrt(jnp.abs(jnp.diag(cov_pp)))
+    tight = jnp.all(jnp.isfinite(sd)) & jnp.all(sd <= options.undetermined * radius)
+    w, h = image_size[0], image_size[1]
+    known = jnp.isfinite(w) & jnp.isfinite(h)
+    inside = (pp[0] >= -0.5) & (pp[0] <= w - 0.5) & (pp[1] >= -0.5) & (pp[1] <= h - 0.5)
+    return tight & (~known | inside)
+
+
 def axes_intersection(ls: Float[Array, "V 3"], used: Bool[Array, " V"]):
     """Least-squares intersection of the used lines ``ls`` (``a^2 + b^2 = 1``):
     ``(point (2,), cov (2, 2), spread_deg)``; ``cov`` NaN with fewer than 3 lines,

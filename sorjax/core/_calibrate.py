@@ -26,6 +26,7 @@ from .._bundle import (DISTORTION_MODELS, BundleProblem, bundle_estimate, bundle
 from .._camera import intrinsics_matrix, transform_points
 from .._linear import linear_estimate
 from ._assess import (DUPLICATE, USED, assess, axes_intersection, outline_extent, outline_radius,
+                      principal_point_determined,
                       perspective_gate, view_verdicts)
 from ._checks import (CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, CULPRIT_VIEWS, MODEL_CONTRADICTED, MODEL_OK,
                       MODEL_WIDENED, NO_CULPRIT, ModelChecks, consistency, duplicate_views, fixed_aspect_check,
@@ -447,7 +448,8 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
     else:
         dist_k, dist_std, dist_g, dist_z = distortion
     est = _intrinsics(K)
-    verdict = assess(est, cov_unit, s_px, jnp.sqrt(jnp.sum(jnp.where(used, radius**2, 0.0)) / jnp.maximum(n_used, 1)),
+    rms_radius = jnp.sqrt(jnp.sum(jnp.where(used, radius**2, 0.0)) / jnp.maximum(n_used, 1))
+    verdict = assess(est, cov_unit, s_px, rms_radius,
                      outline_extent(points, used), image_size, free_aspect, all_inf, persp_ok, options, n_used == 1)
     determined = verdict.determined & assessed
     success = code == RESULTS.successful
@@ -457,8 +459,10 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
     pp_only = all_inf & (~success | ~assessed | ~jnp.all(determined[:2]))
     pp, cov_pp, spread = axes_intersection(homs.l_s, used)
     pp_found = jnp.all(jnp.isfinite(pp))
-    K_pp = jnp.where(pp_found, intrinsics_matrix(jnp.nan, jnp.nan, pp[0], pp[1]), _nan((3, 3)))
-    cov_pp4 = _nan((4, 4)).at[0, 0].set(jnp.inf).at[1, 1].set(jnp.inf).at[2:, 2:].set(cov_pp)
+    pp_det = pp_found & principal_point_determined(pp, cov_pp, rms_radius, image_size, options)
+    K_pp = jnp.where(pp_det, intrinsics_matrix(jnp.nan, jnp.nan, pp[0], pp[1]), _nan((3, 3)))
+    cov_pp4 = _nan((4, 4)).at[0, 0].set(jnp.inf).at[1, 1].set(jnp.inf).at[2:, 2:].set(
+        jnp.where(jnp.isfinite(cov_pp), cov_pp, jnp.inf))
 
     partial = assessed & ~jnp.all(determined)
     code_partial = RESULTS.where(~jnp.any(determined[:2]) & jnp.all(determined[2:]), RESULTS.only_principal_point,
@@ -483,8 +487,9 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
     K_out = jnp.where(contradicted, _nan((3, 3)), K_out)
     omega = jnp.where(contradicted, _nan((3, 3)), omega)
 
-    code = RESULTS.where(pp_only, RESULTS.where(pp_found, RESULTS.only_principal_point, RESULTS.degenerate), code)
+    code = RESULTS.where(pp_only, RESULTS.where(pp_det, RESULTS.only_principal_point, RESULTS.degenerate), code)
     K_out = jnp.where(pp_only, K_pp, K_out)
+    determined = jnp.where(pp_only, jnp.stack([False, False, pp_det, pp_det]), determined)
     cov = jnp.where(pp_only, jnp.where(pp_found, cov_pp4, _nan((4, 4))), cov)
     omega = jnp.where(pp_only, _nan((3, 3)), omega)
     view_rms = jnp.where(pp_only, rms_u, view_rms)
