@@ -586,27 +586,22 @@ def _segment_region(sm: np.ndarray, pbox, iterations: int, o: DetectOptions):
     return win, fg, cut
 
 
-def find_objects(img: np.ndarray, *, iterations: int, min_area: float, o: DetectOptions,
-                 threads: int | None = None):
-    """Surfaces of revolution in the uint8 BGR image ``img``, found with no boxes, on
-    the image reduced to at most ``max_side`` px (scale ``s``).
-
-    Returns ``(objects, notes, s)``: ``objects`` a list of ``(region, symmetry_rms)``,
-    ``region`` a bool image of the reduced size holding the object's GrabCut
-    segmentation there and ``symmetry_rms`` its outline's symmetry residual (reduced
-    px), most symmetric first; ``notes`` one line per proposal dropped that overlaps no
-    kept object, saying why (proposals in which GrabCut kept nothing are not named: a
-    patch of the background).  ``threads``: proposals segmented side by side (None: one
-    per CPU core); the result does not depend on it."""
-    sm, s = _reduce(img, o.max_side)
+def segment_proposal(sm: np.ndarray, s: float, proposal, iterations: int, area_min: float, o: DetectOptions):
+    """``(window, fg or None, why it was dropped or its trimmed RMS residual)`` of one
+    proposal ``(cue, box)`` (``box`` inclusive pixels of the reduced image ``sm``, whose
+    scale is ``s``; regions under ``area_min`` reduced px^2 are nothing): segmented by
+    GrabCut from its box grown by ``box_grow`` (a segmentation reaching a side of its
+    box looks further that way, ``grow_rounds`` times), judged by the symmetry of its
+    outline (:func:`_judge_or_recut`), and, when that segmentation is not symmetric or
+    runs out of its box other than at the image border, segmented again from the box
+    grown by each of ``retry_grow`` in turn until one is kept (the reason given is the
+    first segmentation's).  ``fg`` is a bool image of the window ``(x0, y0, x1, y1)``."""
     h, w = sm.shape[:2]
-    area_min = max(min_area * s * s, 16.0)
 
     def look_with(pbox, where, og):
         """``(window, fg or None, why it was dropped or its trimmed RMS residual, whether
-        another margin may do better: the segmentation was refused as not symmetric or
-        runs out of its box other than at the image border)`` of the proposal box
-        ``pbox`` segmented with the options ``og``."""
+        another margin may do better)`` of the box ``pbox`` segmented with the options
+        ``og``."""
         for _ in range(og.grow_rounds + 1):
             win, fg, cut = _segment_region(sm, pbox, iterations, og)
             if fg.sum() < area_min or not cut or "image border" in cut:
@@ -625,20 +620,56 @@ def find_objects(img: np.ndarray, *, iterations: int, min_area: float, o: Detect
         ok, why, fg, rms, limit = _judge_or_recut(sm, win, fg, iterations, og)
         return win, fg, (rms if ok else f"a region at {where}: {why}"), limit < rms < math.inf
 
+    cue, pbox = proposal
+    where = (f"x {pbox[0] / s:.0f}..{(pbox[2] + 1) / s - 1:.0f}, y {pbox[1] / s:.0f}..{(pbox[3] + 1) / s - 1:.0f} "
+             f"({cue} cue)")
+    first = win, fg, res, retry = look_with(pbox, where, o)
+    for grow in o.retry_grow if retry else ():
+        win, fg, res, _ = look_with(pbox, where, replace(o, box_grow=grow))
+        if not isinstance(res, str):
+            return win, fg, res
+    return first[:3]
+
+
+def judged_box(img: np.ndarray, box, *, iterations: int, min_area: float, o: DetectOptions):
+    """The object in the box ``(x0, y0, x1, y1)`` (inclusive pixels of the uint8 BGR
+    image ``img``) found as the automatic detection finds one from a proposal
+    (:func:`segment_proposal` on the image reduced to at most ``max_side`` px, scale
+    ``s``), except that the box does not grow past where it was drawn (``grow_rounds``
+    0): ``(region, symmetry_rms px, s)`` with ``region`` a bool image of the reduced
+    size, or ``(None, why, s)`` when no segmentation of it is symmetric."""
+    sm, s = _reduce(img, o.max_side)
+    h, w = sm.shape[:2]
+    x0, y0, x1, y1 = box
+    pbox = (max(0, int(math.floor(x0 * s))), max(0, int(math.floor(y0 * s))),
+            min(w - 1, int(math.ceil((x1 + 1) * s)) - 1), min(h - 1, int(math.ceil((y1 + 1) * s)) - 1))
+    win, fg, res = segment_proposal(sm, s, ("box", pbox), iterations, max(min_area * s * s, 16.0),
+                                    replace(o, grow_rounds=0))
+    if isinstance(res, str):
+        return None, res, s
+    region = np.zeros((h, w), bool)
+    region[win[1]:win[3], win[0]:win[2]] = fg
+    return region, res / s, s
+
+
+def find_objects(img: np.ndarray, *, iterations: int, min_area: float, o: DetectOptions,
+                 threads: int | None = None):
+    """Surfaces of revolution in the uint8 BGR image ``img``, found with no boxes, on
+    the image reduced to at most ``max_side`` px (scale ``s``).
+
+    Returns ``(objects, notes, s)``: ``objects`` a list of ``(region, symmetry_rms)``,
+    ``region`` a bool image of the reduced size holding the object's GrabCut
+    segmentation there and ``symmetry_rms`` its outline's symmetry residual (reduced
+    px), most symmetric first; ``notes`` one line per proposal dropped that overlaps no
+    kept object, saying why (proposals in which GrabCut kept nothing are not named: a
+    patch of the background).  ``threads``: proposals segmented side by side (None: one
+    per CPU core); the result does not depend on it."""
+    sm, s = _reduce(img, o.max_side)
+    h, w = sm.shape[:2]
+    area_min = max(min_area * s * s, 16.0)
+
     def look(proposal):
-        """``(window, fg or None, why it was dropped or its trimmed RMS residual)`` of one
-        proposal: segmented from its box grown by ``box_grow``, and, when that
-        segmentation is not symmetric or runs out of its box, by each of ``retry_grow``
-        in turn until one is kept (the reason given is the first segmentation's)."""
-        cue, pbox = proposal
-        where = (f"x {pbox[0] / s:.0f}..{(pbox[2] + 1) / s - 1:.0f}, y {pbox[1] / s:.0f}..{(pbox[3] + 1) / s - 1:.0f} "
-                 f"({cue} cue)")
-        first = win, fg, res, retry = look_with(pbox, where, o)
-        for grow in o.retry_grow if retry else ():
-            win, fg, res, _ = look_with(pbox, where, replace(o, box_grow=grow))
-            if not isinstance(res, str):
-                return win, fg, res
-        return first[:3]
+        return segment_proposal(sm, s, proposal, iterations, area_min, o)
 
     # each proposal is segmented and judged on its own, side by side (OpenCV's GrabCut
     # releases the GIL); the proposals are then taken in order as before
