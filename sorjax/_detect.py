@@ -586,7 +586,8 @@ def _segment_region(sm: np.ndarray, pbox, iterations: int, o: DetectOptions):
     return win, fg, cut
 
 
-def segment_proposal(sm: np.ndarray, s: float, proposal, iterations: int, area_min: float, o: DetectOptions):
+def segment_proposal(sm: np.ndarray, s: float, proposal, iterations: int, area_min: float, o: DetectOptions,
+                     retry_at_border: bool = False):
     """``(window, fg or None, why it was dropped or its trimmed RMS residual)`` of one
     proposal ``(cue, box)`` (``box`` inclusive pixels of the reduced image ``sm``, whose
     scale is ``s``; regions under ``area_min`` reduced px^2 are nothing): segmented by
@@ -595,7 +596,9 @@ def segment_proposal(sm: np.ndarray, s: float, proposal, iterations: int, area_m
     outline (:func:`_judge_or_recut`), and, when that segmentation is not symmetric or
     runs out of its box other than at the image border, segmented again from the box
     grown by each of ``retry_grow`` in turn until one is kept (the reason given is the
-    first segmentation's).  ``fg`` is a bool image of the window ``(x0, y0, x1, y1)``."""
+    first segmentation's; a segmentation reaching the image border is tried again only
+    with ``retry_at_border``, for a box known to be clear of the border, where reaching
+    it is a leak).  ``fg`` is a bool image of the window ``(x0, y0, x1, y1)``."""
     h, w = sm.shape[:2]
 
     def look_with(pbox, where, og):
@@ -616,7 +619,7 @@ def segment_proposal(sm: np.ndarray, s: float, proposal, iterations: int, area_m
             return win, None, f"a region at {where}: GrabCut found no object in it", False
         if cut:
             return win, fg, (f"a region at {where}: its segmentation runs out of the region ({', '.join(cut)}): "
-                             "part of a larger region, or background"), "image border" not in cut
+                             "part of a larger region, or background"), retry_at_border or "image border" not in cut
         ok, why, fg, rms, limit = _judge_or_recut(sm, win, fg, iterations, og)
         return win, fg, (rms if ok else f"a region at {where}: {why}"), limit < rms < math.inf
 
@@ -636,15 +639,17 @@ def judged_box(img: np.ndarray, box, *, iterations: int, min_area: float, o: Det
     image ``img``) found as the automatic detection finds one from a proposal
     (:func:`segment_proposal` on the image reduced to at most ``max_side`` px, scale
     ``s``), except that the box does not grow past where it was drawn (``grow_rounds``
-    0): ``(region, symmetry_rms px, s)`` with ``region`` a bool image of the reduced
+    0) and, for a box clear of the image border, a segmentation that leaks to the
+    border is tried from the other margins too: ``(region, symmetry_rms px, s)`` with ``region`` a bool image of the reduced
     size, or ``(None, why, s)`` when no segmentation of it is symmetric."""
     sm, s = _reduce(img, o.max_side)
     h, w = sm.shape[:2]
     x0, y0, x1, y1 = box
     pbox = (max(0, int(math.floor(x0 * s))), max(0, int(math.floor(y0 * s))),
             min(w - 1, int(math.ceil((x1 + 1) * s)) - 1), min(h - 1, int(math.ceil((y1 + 1) * s)) - 1))
+    clear = pbox[0] > 0 and pbox[1] > 0 and pbox[2] < w - 1 and pbox[3] < h - 1
     win, fg, res = segment_proposal(sm, s, ("box", pbox), iterations, max(min_area * s * s, 16.0),
-                                    replace(o, grow_rounds=0))
+                                    replace(o, grow_rounds=0), retry_at_border=clear)
     if isinstance(res, str):
         return None, res, s
     region = np.zeros((h, w), bool)

@@ -1292,8 +1292,9 @@ def outlines_from_image(
         automatic detection segments a proposal (below; :func:`sorjax._detect.judged_box`):
         GrabCut on the image reduced to at most 640 px from the box grown by 15 % of its
         larger side, then by 8 % and 30 % when that segmentation is not symmetric or
-        runs out of the box, the first symmetric one kept and cut again at full
-        resolution near its boundary.  A box none of whose segmentations is symmetric
+        runs out of the box (for a box clear of the image border, also when it leaks
+        to the border), the first symmetric one kept and cut again at full resolution
+        near its boundary.  A box none of whose segmentations is symmetric
         is cut by ``cv2.grabCut`` at full resolution from the box grown by 15 % (at least
         8 px; GrabCut needs background inside its rectangle), keeping the region with
         the most pixels inside the box given, and its outline's error is measured as for

@@ -174,6 +174,26 @@ def test_a_box_is_segmented_as_a_proposal_and_judged_by_its_symmetry(monkeypatch
     assert out[1].outline_error > 3  # that object's outline is poor either way, and declared so
 
 
+def test_a_box_clear_of_the_border_whose_cut_leaks_to_the_border_tries_other_margins(monkeypatch):
+    # random_photo_set(101)'s second image (1280x960): a vase whose GrabCut from its box
+    # grown by box_grow leaks to the image border.  A proposal found automatically that
+    # does so may be part of a larger region and is not tried again; a box the user drew
+    # clear of the border is, and another margin cuts the vase.
+    r = R.random_photo_set(101, cameras=1, images=2).cameras[0].renders[1]
+    w, h = r.image_size
+    vase = r.objects[0]
+    assert vase.name == "vase" and not vase.occluded
+    b = vase.box
+    box = (max(0, b[0] - 8), max(0, b[1] - 8), min(w - 1, b[2] + 8), min(h - 1, b[3] + 8))
+    assert box[0] > 0 and box[1] > 0 and box[2] < w - 1 and box[3] < h - 1
+    out, ws = found_with_warnings(r.image, [box])
+    assert len(out) == 1 and rms_to(out[0], vase.truth.outline) < 0.3, ws
+    seg = T.segment_proposal
+    monkeypatch.setattr(T, "segment_proposal", lambda *a, retry_at_border=False, **k: seg(*a, **k))
+    region, why, _ = T.judged_box(r.image, box, iterations=5, min_area=400.0, o=T.DetectOptions())
+    assert region is None and "image border" in why
+
+
 def test_clutter_that_is_not_a_surface_of_revolution_is_dropped_with_a_reason():
     r = R.random_table_scene(1, n_objects=2, size_px=(120.0, 170.0))
     img = r.image.copy()
