@@ -826,6 +826,10 @@ def jackknife(r, points: np.ndarray, homs: ViewHomologies, method: str, aspect, 
     det = np.asarray(r.determined, bool)
     if not det.any() or code_name(r.result) not in ("successful", "degenerate", "only_principal_point"):
         return r, []
+    if bool(r.all_at_infinity) and not det[:2].any():
+        # the principal point alone, where three or more imaged axes meet: its covariance
+        # is their scatter; the leave-one-out runs would judge the bundle's estimate
+        return r, []
     used = np.flatnonzero(np.asarray(r.used))
     n = len(used)
     est = _estimate(r.K_raw)

@@ -176,6 +176,11 @@ def test_every_vx_at_infinity_with_noise(at_infinity):
     assert cal.result == sorjax.RESULTS.only_principal_point
     assert np.isnan(cal.fv)
     assert np.max(np.abs(cal.principal_point - K_TRUE[:2, 2])) < 2.0
+    # outlines of measured quality: the same principal point, within its std
+    measured = sorjax.calibrate(outs, outline_error="measured", image_size=(640, HEIGHT))
+    assert measured.result == sorjax.RESULTS.only_principal_point
+    np.testing.assert_allclose(measured.principal_point, cal.principal_point)
+    assert np.all(np.abs(measured.principal_point - K_TRUE[:2, 2]) < 3 * measured.std[2:] + 0.5)
 
 
 def test_one_finite_vx_is_enough(at_infinity):
