@@ -26,7 +26,7 @@ from ._checks import check_sizes
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
 from ._outline import BINARY_MASK_PX, DEFAULT_POINTS, PIXEL_TRACE_NOTE, _as_outlines, implied_outline_error, jagged_note
 from .core._assess import (ASYMMETRIC, COLLAPSED_FOCAL, CONIC, DUPLICATE, MASKED, PP_OUTSIDE, TRIMMED, USED, WIDE_FOV,
-                           axes_intersection, outline_radius, view_verdicts)
+                           axes_intersection, inside_image, outline_radius, view_verdicts)
 from .core._checks import (CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, CULPRIT_VIEWS, MODEL_WIDENED,
                            ModelChecks)
 from .core._calibrate import _intrinsics, calibrate_homologies
@@ -680,10 +680,8 @@ def details_for(r, h, points, method: str, a, outline_error: float, image_size=N
                    "the error of their meeting point")
         else:
             why = f"their meeting point is uncertain by ({sd[0]:.3g}, {sd[1]:.3g}) px"
-        if image_size is not None and np.all(np.isfinite(image_size)):
-            w, h = float(image_size[0]), float(image_size[1])
-            if not (-0.5 <= pp[0] <= w - 0.5 and -0.5 <= pp[1] <= h - 0.5):
-                why += f", and it lies outside the {w:.0f} x {h:.0f} image"
+        if image_size is not None and not bool(inside_image(pp[0], pp[1], np.asarray(image_size, np.float64))):
+            why += f", and it lies outside the {float(image_size[0]):.0f} x {float(image_size[1]):.0f} image"
         return (f"Every view's v_x is at infinity (views {vs}): the imaged axes meet at ({pp[0]:.1f}, {pp[1]:.1f}) "
                 f"px, which is not reported as the principal point: {why}. Neither the focal length nor the "
                 "principal point is determined. Add views with the object away from the image centre, seen from "

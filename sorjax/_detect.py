@@ -640,8 +640,9 @@ def judged_box(img: np.ndarray, box, *, iterations: int, min_area: float, o: Det
     (:func:`segment_proposal` on the image reduced to at most ``max_side`` px, scale
     ``s``), except that the box does not grow past where it was drawn (``grow_rounds``
     0) and, for a box clear of the image border, a segmentation that leaks to the
-    border is tried from the other margins too: ``(region, symmetry_rms px, s)`` with ``region`` a bool image of the reduced
-    size, or ``(None, why, s)`` when no segmentation of it is symmetric."""
+    border is tried from the other margins too: ``(region, symmetry_rms px, s)`` with
+    ``region`` a bool image of the reduced size, or ``(None, why, s)`` when no
+    segmentation of it is symmetric."""
     sm, s = _reduce(img, o.max_side)
     h, w = sm.shape[:2]
     x0, y0, x1, y1 = box

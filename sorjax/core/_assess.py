@@ -51,6 +51,15 @@ def outline_extent(points: Float[Array, "V M 2"], used: Bool[Array, " V"]) -> Fl
     return jnp.max(hi - lo)
 
 
+def inside_image(u0, v0, image_size) -> Bool[Array, ""]:
+    """Whether the point ``(u0, v0)`` (px, pixel centres at integers) lies in the image
+    ``image_size = (width, height)``, whose edges are at ``-0.5`` and ``size - 0.5``;
+    True when the size is unknown (NaN)."""
+    w, h = image_size[0], image_size[1]
+    known = jnp.isfinite(w) & jnp.isfinite(h)
+    return ~known | ((u0 >= -0.5) & (u0 <= w - 0.5) & (v0 >= -0.5) & (v0 <= h - 0.5))
+
+
 def implausible(est: Float[Array, "4"], extent, image_size, options: Options) -> Int[Array, ""]:
     """Why ``(fu, fv, u0, v0)`` (px) is implausible for a camera without distortion
     that took outlines ``extent`` px across (``PLAUSIBLE`` when it is not): a focal
@@ -62,7 +71,7 @@ def implausible(est: Float[Array, "4"], extent, image_size, options: Options) ->
     known = jnp.isfinite(w) & jnp.isfinite(h)
     fov = 2.0 * jnp.degrees(jnp.arctan(jnp.stack([w, h]) / (2.0 * jnp.maximum(jnp.abs(est[:2]), 1e-300))))
     wide = known & (jnp.max(fov) > options.max_fov_deg)
-    outside = known & ~((est[2] >= -0.5) & (est[2] <= w - 0.5) & (est[3] >= -0.5) & (est[3] <= h - 0.5))
+    outside = ~inside_image(est[2], est[3], image_size)
     code = jnp.where(outside, PP_OUTSIDE, PLAUSIBLE)
     code = jnp.where(wide, WIDE_FOV, code)
     code = jnp.where(f < options.min_focal_fraction * extent, COLLAPSED_FOCAL, code)
@@ -149,13 +158,10 @@ def principal_point_determined(pp, cov_pp, radius, image_size, options: Options)
     views cannot show their own error), its standard deviations are at most
     ``undetermined`` times the outlines' RMS ``radius`` (px; as :func:`assess` judges a
     principal point without a focal length) and, with ``image_size = (width, height)``
-    known, it lies inside the image (:func:`implausible`'s test)."""
+    known, it lies inside the image (:func:`inside_image`)."""
     sd = jnp.sqrt(jnp.abs(jnp.diag(cov_pp)))
     tight = jnp.all(jnp.isfinite(sd)) & jnp.all(sd <= options.undetermined * radius)
-    w, h = image_size[0], image_size[1]
-    known = jnp.isfinite(w) & jnp.isfinite(h)
-    inside = (pp[0] >= -0.5) & (pp[0] <= w - 0.5) & (pp[1] >= -0.5) & (pp[1] <= h - 0.5)
-    return tight & (~known | inside)
+    return tight & inside_image(pp[0], pp[1], image_size)
 
 
 def axes_intersection(ls: Float[Array, "V 3"], used: Bool[Array, " V"]):
