@@ -21,13 +21,19 @@ def test_cli_calibrates_from_files(tmp_path, capsys):
 
 
 def test_cli_bad_input_is_one_line_and_exit_2(tmp_path):
+    """... and ``sorjax calibrate`` keeps its compiled programs in ``$SORJAX_CACHE``
+    (made before any input is read: later runs skip about 30 s of compilation)."""
+    import os
+
     bad = tmp_path / "bad.txt"
     bad.write_text("1 2\n3 nan\n")
+    cache = tmp_path / "xla"
     r = subprocess.run([sys.executable, "-m", "sorjax", "calibrate", str(bad), str(tmp_path / "missing.npy")],
-                       capture_output=True, text=True, timeout=300)
+                       capture_output=True, text=True, timeout=300, env={**os.environ, "SORJAX_CACHE": str(cache)})
     assert r.returncode == 2
     assert "Traceback" not in r.stderr
     assert "sorjax: error:" in r.stderr and ("NaN" in r.stderr or "no such file" in r.stderr)
+    assert cache.is_dir()
 
 
 def test_cli_outline_error_option(tmp_path, capsys):

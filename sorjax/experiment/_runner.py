@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._compile_cache import enable_compilation_cache as enable_compilation_cache
 from .._files import absolute, atomic_folder, check_folder, safe_name
 from ._config import Config
 from ._report import error_figures, records_csv, reference_lines, scene_figure, summarise, table_markdown
@@ -48,22 +49,6 @@ class RunResult:
     bounds: dict
     table: str
     seconds: float
-
-
-def enable_compilation_cache() -> None:
-    """Keep compiled XLA programs on disk between runs and worker processes
-    (``$SORJAX_CACHE`` or the user's cache folder), so only the first run compiles."""
-    import jax
-
-    root = os.environ.get("SORJAX_CACHE") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME", os.path.join(os.path.expanduser("~"), ".cache")), "sorjax", "xla")
-    try:
-        os.makedirs(root, exist_ok=True)
-        jax.config.update("jax_compilation_cache_dir", root)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
-        jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    except Exception:  # a read-only home: compile every time  # pragma: no cover
-        pass
 
 
 def environment() -> dict:
