@@ -1141,7 +1141,9 @@ def calibrate(
       point is estimable: ``RESULTS.only_principal_point`` with the least-squares
       intersection of the ``l_s`` in ``K[:2, 2]`` and NaN focal lengths, when three
       axes or more fix it (two always meet: their meeting point cannot show its own
-      error), its standard deviations are at most a third of the outlines' RMS radius
+      error), its standard deviations (the axes' scatter about it, widened by
+      Student's t for their ``k - 2`` degrees of freedom:
+      :func:`sorjax.core._assess.few_dof_widening`) are at most a third of the outlines' RMS radius
       and it lies inside the image (``image_size``); else ``RESULTS.degenerate`` with
       K all NaN and the meeting point named in the message;
     * the bundle's focal length is not determined when the outlines show too little

@@ -164,10 +164,39 @@ def principal_point_determined(pp, cov_pp, radius, image_size, options: Options)
     return tight & inside_image(pp[0], pp[1], image_size)
 
 
+# t_nu(Phi(3)) / 3 for nu = 1 .. 30 degrees of freedom (scipy.stats.t.ppf; checked in
+# tests/test_degenerate.py): how much wider than a known-variance std a std estimated
+# from nu residuals must be for +-3 of it to cover what +-3 sigma covers (99.73 %)
+_T_WIDEN = (78.6005, 6.40225, 3.07298, 2.20674, 1.83569, 1.63469, 1.50999, 1.42554, 1.36475, 1.31898,
+            1.28331, 1.25476, 1.23140, 1.21193, 1.19547, 1.18138, 1.16917, 1.15849, 1.14908, 1.14072,
+            1.13324, 1.12652, 1.12044, 1.11492, 1.10988, 1.10526, 1.10102, 1.09710, 1.09348, 1.09011)
+
+
+def few_dof_widening(nu) -> Float[Array, ""]:
+    """``t_nu(Phi(3)) / 3``: the factor by which a standard deviation estimated from the
+    scatter of ``nu`` residuals (``nu`` >= 1, traced) is widened so that +-3 of it
+    covers 99.73 %, as +-3 sigma does for a known variance (Student's t; 78.6 for one
+    degree of freedom, 6.4 for two, 1.09 for 30; beyond 30 the Cornish-Fisher
+    expansion ``1 + (z^2 + 1) / (4 nu) + (5 z^4 + 16 z^2 + 3) / (96 nu^2)``, z = 3)."""
+    nu = jnp.asarray(nu, jnp.float64)
+    table = jnp.asarray(_T_WIDEN)
+    i = jnp.clip(jnp.round(nu).astype(jnp.int32), 1, len(_T_WIDEN)) - 1
+    big = jnp.maximum(nu, 1.0)
+    series = 1.0 + 10.0 / (4.0 * big) + (5.0 * 81.0 + 16.0 * 9.0 + 3.0) / (96.0 * big**2)
+    return jnp.where(nu <= len(_T_WIDEN), table[i], series)
+
+
 def axes_intersection(ls: Float[Array, "V 3"], used: Bool[Array, " V"]):
     """Least-squares intersection of the used lines ``ls`` (``a^2 + b^2 = 1``):
     ``(point (2,), cov (2, 2), spread_deg)``; ``cov`` NaN with fewer than 3 lines,
-    ``point`` NaN when they are (nearly, within 1 deg) parallel."""
+    ``point`` NaN when they are (nearly, within 1 deg) parallel.
+
+    ``cov = s^2 (A^T A)^-1 w^2`` (px^2), ``s^2`` the lines' scatter about the point with
+    ``k - 2`` degrees of freedom (``k`` lines) and ``w`` :func:`few_dof_widening` of
+    them: with three lines ``s^2`` rests on one residual, which is below a ninth of its
+    expectation a quarter of the time, so the bare ``s^2`` would make a principal point
+    3 of its "standard deviations" off in 26 % of cases; widened, +-3 std covers
+    99.73 % whatever ``k``."""
     w = used.astype(ls.dtype)
     A, b = ls[:, :2] * w[:, None], -ls[:, 2] * w
     N = A.T @ A
@@ -176,5 +205,6 @@ def axes_intersection(ls: Float[Array, "V 3"], used: Bool[Array, " V"]):
     x = jnp.linalg.solve(jnp.where(parallel, jnp.eye(2), N), A.T @ b)
     k = jnp.sum(w)
     s2 = jnp.sum((A @ x - b) ** 2) / jnp.maximum(k - 2, 1.0)
+    s2 = s2 * few_dof_widening(jnp.maximum(k - 2, 1.0)) ** 2
     cov = jnp.where(k >= 3, s2 * jnp.linalg.inv(jnp.where(parallel, jnp.eye(2), N)), jnp.nan)
     return jnp.where(parallel, jnp.nan, x), jnp.where(parallel, jnp.nan, cov), spread
