@@ -24,7 +24,9 @@ extraction sorjax has.  Printed per column:
   outline with the object's mask >= 0.5, one outline per object); objects partly
   hidden by clutter are counted apart (``occluded``) and left out of the outline error;
 * outline error: RMS distance (px) of a found outline's points to the exact silhouette;
-  the median over found unoccluded objects and the fraction within 1 px;
+  the median over found unoccluded objects and the fraction within 1 px; in the summary
+  also the objects found *and* within 1 px (good outlines), which compares columns that
+  keep poor outlines (boxes) with those that drop them (auto);
 * calibration of each camera: ``sorjax.calibrate`` (defaults: bundle, free aspect,
   ``image_size`` given) on all outlines of its images (false detections included, as a
   user would pass them), with the outline error the command line uses: ``"measured"``
@@ -38,7 +40,8 @@ Issue 17's targets (automatic column): >= 90 % found, median RMS <= 0.3 px, >= 9
 them within 1 px, every camera ok or refused, no confident wrong K over >= 30 sets.
 
     python experiments/photos.py [--sets 5] [--seed 0] [--boxes] [--contours] [--no-auto] [--no-masks]
-                                 [--save DIR] [--outlines DIR] [--mask-errors PX ...] [--no-symmetric] [--quick]
+                                 [--save DIR] [--outlines DIR] [--mask-errors PX ...] [--no-symmetric]
+                                 [--max-error PX] [--quick]
 
 Cost: a set renders in about 15 s of CPU (most of it the exact silhouettes); the run's
 time is mostly ``sorjax.calibrate`` (one call per camera and column, 10 to 16 views,
@@ -113,6 +116,16 @@ def _extract(name: str, r: render.Rendering, store: str | None, stem: str, symme
         with open(path, "wb") as fh:
             pickle.dump(saved, fh)
     return res
+
+
+def _below(outlines: list, limit: float, label: str):
+    """``--max-error``: the outlines whose estimated error (``outline_error``, px) is at
+    most ``limit`` (those without one kept), or a ValueError when none is left, as
+    ``sorjax.outlines_from_image`` says it."""
+    kept = [o for o in outlines if not getattr(o, "outline_error", 0.0) > limit]
+    if not kept:
+        return ValueError(f"{label}: every outline's estimated error is above --max-error {limit:g} px")
+    return kept
 
 
 def _filled(outline: np.ndarray, shape) -> np.ndarray:
@@ -226,11 +239,13 @@ class Column:
         rms = np.asarray(self.rms)
         med = f"{np.median(rms):.3f}" if rms.size else "-"
         within = f"{100 * np.mean(rms <= WITHIN_PX):.0f} %" if rms.size else "-"
+        good = int(np.sum(rms <= WITHIN_PX))
         cams = len(self.cameras)
         fe = np.asarray(self.focal_err)
         return (f"{self.name:<6} found {self.found}/{self.objects} ({100 * self.found / max(self.objects, 1):.0f} %)"
                 f" [+{self.extra} other outlines; occluded {self.occluded_found}/{self.occluded}], "
-                f"outline RMS median {med} px, within {WITHIN_PX:g} px {within}; cameras ok {self.cameras.count('ok')}"
+                f"outline RMS median {med} px, within {WITHIN_PX:g} px {within} (found and within: {good}, "
+                f"{100 * good / max(self.objects, 1):.0f} % of the objects); cameras ok {self.cameras.count('ok')}"
                 f"/{cams}, refused {self.cameras.count('refused')}, WRONG {self.cameras.count('WRONG')}"
                 f" (median focal err {np.median(fe) if fe.size else float('nan'):.2f} %); confident wrong K "
                 f"{len(self.confident_wrong)} of {self.determined} determined; image failures "
@@ -265,6 +280,8 @@ def run_set(seed: int, args, columns: dict[str, Column]) -> None:
                 t1 = time.perf_counter()
                 if name in IMAGE_COLUMNS:
                     res = _extract(name, r, args.outlines, f"set{seed}_cam{ci}_img{k}", not args.no_symmetric)
+                    if args.max_error is not None and not isinstance(res, Exception):
+                        res = _below(res, args.max_error, label)
                 elif name == "contours":
                     res = [c[:, 0, :].astype(np.float64) for o in r.objects
                            for c in cv2.findContours((o.coverage >= 0.5).astype(np.uint8), cv2.RETR_EXTERNAL,
@@ -311,10 +328,16 @@ def main(argv=None):
     ap.add_argument("--no-symmetric", action="store_true",
                     help="outlines_from_image(symmetric=False): no averaging with the outlines' mirror images (the "
                          "outlines before session 23), to compare; with --outlines, a folder of its own")
+    ap.add_argument("--max-error", metavar="PX", type=float, default=None,
+                    help="drop the outlines found in images (auto, boxes) whose estimated error (outline_error) "
+                         "exceeds PX px before matching and calibrating: what a tighter limit than "
+                         "sorjax._detect.DetectOptions.max_error_px (1.5 px, automatic finding only) would give")
     ap.add_argument("--quick", action="store_true", help="2 sets")
     args = ap.parse_args(argv)
     if args.quick:
         args.sets = 2
+    if args.max_error is not None and not (math.isfinite(args.max_error) and args.max_error > 0):
+        ap.error(f"--max-error: an outline error is a number of pixels > 0, got {args.max_error}")
     enable_compilation_cache()
     names = (([] if args.no_auto else ["auto"]) + (["boxes"] if args.boxes else [])
              + ([] if args.no_masks else ["masks"]) + (["contours"] if args.contours else []))
@@ -328,7 +351,9 @@ def main(argv=None):
         ap.error("no column left to run (drop --no-auto or --no-masks, or add --boxes / --contours / --mask-errors)")
     print(f"sorjax photo-like test bed: {args.sets} set(s), seeds {args.seed}..{args.seed + args.sets - 1}, "
           f"{args.cameras} cameras x {args.images} images; columns {', '.join(names)}"
-          + ("; outlines not averaged with their mirror images (--no-symmetric)" if args.no_symmetric else ""),
+          + ("; outlines not averaged with their mirror images (--no-symmetric)" if args.no_symmetric else "")
+          + (f"; outlines above {args.max_error:g} px of estimated error dropped (--max-error)"
+             if args.max_error is not None else ""),
           flush=True)
     t0 = time.perf_counter()
     for s in range(args.seed, args.seed + args.sets):
