@@ -194,9 +194,10 @@ def axes_intersection(ls: Float[Array, "V 3"], used: Bool[Array, " V"]):
     ``cov = s^2 (A^T A)^-1 w^2`` (px^2), ``s^2`` the lines' scatter about the point with
     ``k - 2`` degrees of freedom (``k`` lines) and ``w`` :func:`few_dof_widening` of
     them: with three lines ``s^2`` rests on one residual, which is below a ninth of its
-    expectation a quarter of the time, so the bare ``s^2`` would make a principal point
-    3 of its "standard deviations" off in 26 % of cases; widened, +-3 std covers
-    99.73 % whatever ``k``."""
+    expectation a quarter of the time, and the bare ``s^2`` would put a principal point
+    beyond 3 of its "standard deviations" in 20 % of cases (Student's t with one
+    degree of freedom: ``1 - 2 atan(3) / pi``); widened, +-3 std covers 99.73 % whatever
+    ``k``."""
     w = used.astype(ls.dtype)
     A, b = ls[:, :2] * w[:, None], -ls[:, 2] * w
     N = A.T @ A
