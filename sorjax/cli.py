@@ -384,12 +384,12 @@ def _finite_arg(what: str):
 def _calibrate(args) -> int:
     import sorjax
 
+    from ._camera_io import write_camera
     from ._compile_cache import enable_compilation_cache
 
     # the homology fit and the calibration compile for about 30 s on a CPU: kept on disk,
     # so that only a machine's first run pays for them (experiments do the same)
     enable_compilation_cache()
-    from ._camera_io import write_camera
 
     is_image = [Path(f).suffix.lower() in IMAGE_SUFFIXES for f in args.outlines]
     if any(is_image) and not all(is_image):
