@@ -35,7 +35,7 @@ import numpy as np
 
 import sorjax
 from sorjax import scenes
-from sorjax._camera import angle_between_planes, angle_between_rays
+from sorjax.core._camera import angle_between_planes, angle_between_rays
 
 METHODS = ("I", "IIa", "IIb", "bundle")
 

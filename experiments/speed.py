@@ -34,7 +34,7 @@ One run prints, on this machine:
    evaluation in the solvers' form (closest points searched near a hint), timed
    alone: a jitted ``jax.jacfwd`` of the per-view residuals
    (:func:`sorjax.core._viewfit._residuals`) and of the bundle's
-   (:func:`sorjax._bundle.residuals` on :func:`sorjax._bundle.make_problem`), each in
+   (:func:`sorjax.core._bundle.residuals` on :func:`sorjax.core._bundle.make_problem`), each in
    a ``lax.map`` of ``--floor-calls`` calls so that dispatch is amortised.  The floor
    leaves out the linear algebra of each step, the seed ranking, the covariances and
    the no-perspective evidence solve: it is a lower bound.
@@ -67,6 +67,7 @@ warm run time (median of 8 calls).
     python experiments/speed.py --trials 10 --devices 2
     python experiments/speed.py --trials 1 --skip-quick --components
     python experiments/speed.py --calibrate-program
+    python experiments/speed.py --first-k             # time to the first K, fresh processes
     XLA_FLAGS=--xla_backend_optimization_level=0 python experiments/speed.py --calibrate-program  # the tests' level
 """
 
@@ -257,8 +258,8 @@ def residual_jacobian_times(points, homs, K, n_samples: int, calls: int) -> tupl
     import jax
     import jax.numpy as jnp
 
-    from sorjax import _bundle
-    from sorjax._camera import transform_points
+    from sorjax.core import _bundle
+    from sorjax.core._camera import transform_points
     from sorjax._homology import symmetry_feet
     from sorjax.core import joint_transform, prepare_views
     from sorjax.core._viewfit import _pack, _residuals, _unpack
@@ -297,11 +298,11 @@ def _solver_step_times(field, samples, weights, p, v0, E, y, problem, rng, calls
     included: the whole-outline closest-point search at its start and end, the
     solver's linear algebra and loop): per view Levenberg-Marquardt
     (:func:`sorjax.core._viewfit.refine`) and the bundle's Gauss-Newton
-    (:func:`sorjax._bundle.solve`), from starts perturbed off the fit."""
+    (:func:`sorjax.core._bundle.solve`), from starts perturbed off the fit."""
     import jax
     import jax.numpy as jnp
 
-    from sorjax import _bundle
+    from sorjax.core import _bundle
     from sorjax.core._viewfit import refine
 
     def per_step(solve, xs, args):
@@ -561,7 +562,7 @@ def components(points: np.ndarray, opts, methods: tuple[str, ...]) -> list[tuple
     import jax
     import jax.numpy as jnp
 
-    from sorjax import _bundle as B
+    from sorjax.core import _bundle as B
     from sorjax import core
     from sorjax.core import _calibrate as C
     from sorjax.core import _checks as CH
@@ -686,6 +687,62 @@ def calibrate_program(seed: int = 0, views: int = 4, runs: int = 8) -> dict:
                 warm_s=statistics.median(warm), f_err_pct=f_err, flags=os.environ.get("XLA_FLAGS", ""))
 
 
+FIRST_K_SCRIPT = r"""
+import time
+t0 = time.perf_counter()
+import warnings
+import numpy as np
+import sorjax
+from sorjax import scenes
+t1 = time.perf_counter()
+warnings.simplefilter("ignore")
+sc = scenes.two_spheres(f=700.0)
+outlines = [scenes.paper_noise(o, 0.5, i) for i, o in enumerate(sc.outlines)]  # 0.5 px, seeds 0, 1, 2
+cal = sorjax.calibrate(outlines)
+t2 = time.perf_counter()
+k1 = sorjax.calibrate(outlines, distortion="k1")
+t3 = time.perf_counter()
+print("FIRSTK", t1 - t0, t2 - t0, t3 - t2, float(cal.fv), bool(cal.success))
+"""
+
+
+def first_k(timeout: float) -> dict:
+    """Time to the first K in fresh Python processes (issue 41's figure): ``import
+    sorjax`` + ``sorjax.calibrate`` of the 3 outlines of ``scenes.two_spheres(f=700)``
+    with 0.5 px noise (seeds 0-2; pinhole, free aspect), import included; then the
+    first ``distortion="k1"`` call in the same process.  Once with an empty cache
+    folder (``SORJAX_CACHE``: compilation cache and stored programs), then again with
+    the cache that run left (warm)."""
+    cache = _fresh_cache()
+    out = {}
+    for label in ("cold", "warm"):
+        env = dict(os.environ, SORJAX_CACHE=cache)
+        t = time.perf_counter()
+        r = subprocess.run([sys.executable, "-c", FIRST_K_SCRIPT], env=env, capture_output=True, text=True,
+                           timeout=timeout)
+        wall = time.perf_counter() - t
+        line = next((ln for ln in r.stdout.splitlines() if ln.startswith("FIRSTK")), None)
+        if line is None:
+            raise RuntimeError(f"first-K subprocess failed:\n{r.stderr[-2000:]}")
+        _, imp, first, k1, fv, ok = line.split()
+        out[label] = dict(import_s=float(imp), first_k_s=float(first), k1_s=float(k1), fv=float(fv),
+                          success=ok == "True", wall_s=wall)
+    return out
+
+
+def print_first_k(timeout: float) -> dict:
+    print("time to first K: a fresh process, import sorjax + calibrate(3 outlines of two_spheres(f=700), 0.5 px, "
+          "seeds 0-2), import included ...", flush=True)
+    fk = first_k(timeout)
+    for label, target in (("cold", 10.0), ("warm", 3.0)):
+        r = fk[label]
+        print(f"    {label} cache: import {r['import_s']:.1f} s, first K {r['first_k_s']:.1f} s "
+              f"(target <= {target:g} s: {_mark(r['first_k_s'] <= target)}); then distortion='k1' "
+              f"{r['k1_s']:.1f} s (target <= 1 s: {_mark(r['k1_s'] <= 1.0)}); fv {r['fv']:.1f} px, success "
+              f"{r['success']}")
+    return fk
+
+
 def _mark(ok):
     return "-" if ok is None else ("pass" if ok else "MISS")
 
@@ -711,6 +768,8 @@ def main(argv=None):
     p.add_argument("--calibrate-program", action="store_true",
                    help="only measure one sorjax.calibrate call's compiled program (size, trace, compile, first and "
                         "warm run), then exit")
+    p.add_argument("--first-k", action="store_true",
+                   help="only measure the time to the first K in fresh processes (empty cache, then warm), then exit")
     p.add_argument("--program-views", type=int, default=4, help="views of --calibrate-program's scene")
     p.add_argument("--program-seed", type=int, default=0, help="random_sor_scene seed of --calibrate-program's scene")
     a = p.parse_args(argv)
@@ -718,6 +777,9 @@ def main(argv=None):
 
     if not a.warm_cache:
         os.environ["SORJAX_CACHE"] = _fresh_cache()  # before the runner enables the cache
+    if a.first_k:
+        print_first_k(a.timeout)
+        return
     if a.calibrate_program:
         import jax
 
@@ -733,6 +795,7 @@ def main(argv=None):
               f"{r['lower_s']:.1f} s, XLA compile {r['compile_s']:.1f} s")
         print(f"    first calibrate (per-view fits compiled, the core from the cache): {r['first_s']:.1f} s; warm "
               f"{_ms(r['warm_s'])} a call (median of 8); focal error {r['f_err_pct']:.2g} %")
+        print_first_k(a.timeout)
         return
     if a.table_json:
         nums, _, _ = measure_table(a.trials, a.chunk)

@@ -23,6 +23,7 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from ._checks import check_sizes
+from ._compile import one_off_jit
 from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
 from ._outline import BINARY_MASK_PX, DEFAULT_POINTS, PIXEL_TRACE_NOTE, _as_outlines, implied_outline_error, jagged_note
 from .core._assess import (ASYMMETRIC, COLLAPSED_FOCAL, CONIC, DUPLICATE, MASKED, PP_OUTSIDE, TRIMMED, USED, WIDE_FOV,
@@ -278,7 +279,7 @@ RESIDUAL_FLOOR_PX = _O.residual_floor_px
 # revolution) hide from the symmetry residual but can fake or cancel that much, and the
 # bundle's covariance, a linearisation at its own estimate, can then be confident far
 # from the truth.  So the focal length counts as determined only when the best camera
-# with no perspective (:func:`sorjax._bundle.orthographic_cost`) fits the outlines worse
+# with no perspective (:func:`sorjax.core._bundle.orthographic_cost`) fits the outlines worse
 # by a cost delta with sqrt(delta / s^2) >= PERSPECTIVE_Z (the noise cannot explain it)
 # and sqrt(delta / n) >= PERSPECTIVE_FACTOR * outline_error px (nor can a systematic
 # error of the outlines of `outline_error` px RMS: a fully aligned one changes the cost
@@ -744,7 +745,7 @@ def view_homologies(homologies, n_samples: int) -> ViewHomologies:
     return ViewHomologies(**{k: np.stack([r[k] for r in rows]) for k in rows[0]})
 
 
-@functools.partial(jax.jit, static_argnames=("method",))
+@functools.partial(one_off_jit, static_argnames=("method",))
 def _core(points, homs, aspect, options, image_size, valid, fixed=None, noise=None, noise_ell=None, *,
           method: str = "bundle"):
     """One method's estimate (:func:`sorjax.core.calibrate_homologies`): one compiled
@@ -759,7 +760,7 @@ def _core(points, homs, aspect, options, image_size, valid, fixed=None, noise=No
                                 fixed=fixed, noise=noise, noise_ell=noise_ell)
 
 
-@functools.partial(jax.jit, static_argnames=("distortion",))
+@functools.partial(one_off_jit, static_argnames=("distortion",))
 def _core_distorted(points, homs, aspect, options, image_size, valid, distortion, fixed=None, noise=None,
                     noise_ell=None):
     """The bundle with radial distortion (``distortion`` "k1" or "k1k2")."""
@@ -1107,7 +1108,7 @@ def calibrate(
             was measured; the calibration's noise level (covariance, model checks,
             perspective evidence, whether a view's ``v_x`` is at infinity) then takes
             each view's residuals as at least this
-            (:attr:`sorjax._bundle.BundleProblem.noise`); the cost, and so ``K``, is
+            (:attr:`sorjax.core._bundle.BundleProblem.noise`); the cost, and so ``K``, is
             the same.
         outline_noise_ell: the correlation length along the curve (px) of the noise
             behind each ``outline_noise`` (:attr:`Homology.noise_ell` of the outline

@@ -78,7 +78,7 @@ def distortion_coefficients(cal):
     tangential terms zero) and the std of ``(k1, k2)`` (``cal.distortion_std``; NaN
     where absent, 0 for a coefficient not estimated); zeros and None when ``cal`` has
     no finite distortion (a pinhole camera)."""
-    from ._distortion import opencv_coefficients
+    from .core._distortion import opencv_coefficients
 
     k = getattr(cal, "distortion", None)
     if k is None:
@@ -125,7 +125,7 @@ def _lens_maps(lens):
     if lens is None:
         ident = lambda x: np.asarray(x, np.float64)  # noqa: E731
         return ident, ident
-    from ._distortion import distort, undistort
+    from .core._distortion import distort, undistort
 
     K, k = (np.asarray(a, np.float64) for a in lens)
     return (lambda x: np.asarray(distort(np.asarray(x, np.float64), K, k)),
@@ -161,7 +161,7 @@ def draw_overlay(image, views, path, lens=None) -> Path:
     pinhole intrinsics, px; ``k`` OpenCV's radial coefficients): ``l_s`` and ``v_x``
     are then those of the pinhole (undistorted) image, and the overlay shows them in
     the distorted photograph: the axis as the curve ``D(l_s)`` (points of the line,
-    distorted), each pair as ``x <-> D(W D^-1(x))`` (:func:`sorjax._distortion.distort`)."""
+    distorted), each pair as ``x <-> D(W D^-1(x))`` (:func:`sorjax.core._distortion.distort`)."""
     import cv2
 
     img = np.ascontiguousarray(image).copy()

@@ -285,7 +285,7 @@ def _regions(mask: np.ndarray, cue: str, band: int, o: DetectOptions, out: list)
 
 
 def _cue_border(sm, band, iterations, o, out):
-    from ._extract import _grabcut
+    from ._segment import _grabcut
 
     h, w = sm.shape[:2]
     fg = _grabcut(sm, None, (band, band, w - 2 * band, h - 2 * band), iterations)
@@ -393,7 +393,7 @@ def symmetry_of(fg: np.ndarray, offset=(0, 0)):
     """``(outline, homology)`` of the binary region ``fg`` (its outline from the mask
     path, in the coordinates of a larger image where ``fg`` starts at column
     ``offset[0]``, row ``offset[1]``), or ``(None, None)`` when it has none."""
-    from ._extract import _outlines_from_field
+    from ._masks import _outlines_from_field
     from ._homology import fit_homology
 
     F = np.pad(fg.astype(np.float64), 2)
@@ -465,7 +465,7 @@ def mirror_grabcut(img: np.ndarray, win, fg: np.ndarray, W, iterations: int, o: 
     disagreement ``R ^ W(R)`` and a band of ``recut_px`` around ``R | W(R)`` probable
     background, the rest background, so that only the colours put a one-sided part
     (a leak on one side, or the mirror of a bite on the other) back."""
-    from ._extract import _dilate, _erode, _grabcut, _largest_component
+    from ._segment import _dilate, _erode, _grabcut, _largest_component
 
     x0, y0, x1, y1 = win
     m = mirrored(fg, np.asarray(W), (x0, y0))
@@ -561,7 +561,7 @@ def _segment_region(sm: np.ndarray, pbox, iterations: int, o: DetectOptions):
     """GrabCut of the proposal ``pbox`` on the reduced image ``sm`` (its box grown by
     :func:`grow_box`): ``(window (x0, y0, x1, y1), foreground in it, sides of the grown
     box or 'image border' that the foreground reaches)``."""
-    from ._extract import _crop_box, _grabcut, _largest_component
+    from ._segment import _crop_box, _grabcut, _largest_component
 
     h, w = sm.shape[:2]
     box = grow_box(pbox, (h, w), o)
@@ -752,7 +752,7 @@ def refine_to_edges(image, p: np.ndarray, o: DetectOptions, keep: bool = False):
     Returns ``(q, stats)``: the moved outline (N, 2) and a dict with ``outline_error``
     (px, see the module docstring), ``edge_contrast`` and ``accepted`` (and with
     ``keep``, ``kept``: (N,) bool, the points whose edge was confirmed)."""
-    from ._extract import _periodic_gauss
+    from ._masks import _periodic_gauss
 
     image_fn, shape = image
     H, W = shape
@@ -887,9 +887,9 @@ def symmetric_average(p: np.ndarray, W, confirmed: np.ndarray, o: DetectOptions)
     the options were chosen on them) the median RMS distance to the exact silhouette went
     from 0.51 px to 0.36 px (0.40 px with ``average_px`` 0.5, 0.43 px with 1), the share
     within 1 px from 75 to 80 % (78 % with 1)."""
-    from ._extract import _periodic_gauss
+    from ._masks import _periodic_gauss
     from ._homology import transfer
-    from .scenes import closest_points_on_polyline
+    from ._curves import closest_points_on_polyline
 
     p = np.asarray(p, np.float64)
     m = np.asarray(transfer(np.asarray(W, np.float64), p))

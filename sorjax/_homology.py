@@ -13,7 +13,7 @@ Per view we minimise the paper's eq. 20::
     Cost(v, l) = sum_i d(W(v, l) x_i)^2
 
 over ``N`` samples ``x_i`` evenly spaced along the outline, ``d`` being the signed
-orthogonal distance to the outline (:mod:`sorjax._field`).  The fit runs in
+orthogonal distance to the outline (:mod:`sorjax.core._field`).  The fit runs in
 per-view normalised coordinates (centroid at the origin, RMS radius sqrt 2) with the
 parameters ``p = (theta, rho, d1, d2)``::
 
@@ -52,7 +52,6 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from ._checks import boolean, check_sizes, integer, number
-from ._field import DistanceField, checked_distances, closest_parameter, signed_distances
 from ._outline import DEFAULT_POINTS, make_outline, perimeter
 
 
@@ -85,7 +84,7 @@ class Homology(eqx.Module):
             at all by it, so that trimming never makes an asymmetric outline (a
             segmentation leak) pass.  None for homologies built by hand.
         noise_ell: the correlation length along the curve (px) of the outline's
-            noise, read off the fit's residuals (:mod:`sorjax._noise`); with ``rms``,
+            noise, read off the fit's residuals (:mod:`sorjax.core._noise`); with ``rms``,
             what an outline later averaged with its own mirror image passes on as its
             noise floor (:func:`sorjax.calibrate`'s ``outline_noise``,
             ``outline_noise_ell``).  None for homologies built by hand.
@@ -135,57 +134,9 @@ class Homology(eqx.Module):
         return bool(self.conic_rms <= o.conic_ratio * self.rms + o.conic_floor_px)
 
 
-# ---------------------------------------------------------------------------- maths
-
-
-def homology_matrix(v: Float[Array, "3"], l: Float[Array, "3"]) -> Float[Array, "3 3"]:
-    """Harmonic homology ``W = I - 2 v l^T / (v^T l)`` (any consistent coordinates)."""
-    return jnp.eye(3) - 2.0 * jnp.outer(v, l) / (v @ l)
-
-
-def transfer(W: Float[Array, "3 3"], x: Float[Array, "N 2"]) -> Float[Array, "N 2"]:
-    """Map inhomogeneous points by the homography ``W`` (guarded against points sent
-    to infinity, which are sent very far instead)."""
-    y = x @ W[:, :2].T + W[:, 2]
-    w = y[:, 2]
-    w = jnp.where(jnp.abs(w) < 1e-12, jnp.where(w < 0, -1e-12, 1e-12), w)
-    return y[:, :2] / w[:, None]
-
-
-def symmetry_residuals(
-    v: Float[Array, "3"], l: Float[Array, "3"], samples: Float[Array, "N 2"], field: DistanceField, weights=None,
-    hints=None,
-) -> Float[Array, "N"]:
-    """The residuals of eq. 20: ``w_i d(W(v, l) x_i)`` for each sample ``x_i``, in the
-    units of the field (pixels if the field and samples are in pixels); ``weights``
-    ``w_i`` default to 1 (:func:`sorjax._field.sample_weights` zeroes samples at
-    corners); ``hints`` (N,) optional closest-point parameters to search near
-    (:func:`sorjax._field.closest_parameter_near`)."""
-    r = signed_distances(field, transfer(homology_matrix(v, l), samples), hints)
-    return r if weights is None else r * weights
-
-
-def symmetry_checked(v: Float[Array, "3"], l: Float[Array, "3"], samples: Float[Array, "N 2"], field: DistanceField,
-                     weights, hints=None):
-    """:func:`symmetry_residuals` at the end of a solve that searched closest points
-    near ``hints``: ``(r, t, r_near)``, the whole-outline residuals, their closest-point
-    parameters (:func:`symmetry_feet`: the next solve's hints) and the residuals
-    searched near ``hints`` (:func:`sorjax._field.checked_distances`: one pass; None:
-    ``r`` again, only the whole outline searched)."""
-    d, t, d_near = checked_distances(field, transfer(homology_matrix(v, l), samples), hints)
-    return d * weights, t, d_near * weights
-
-
-def symmetry_feet(v: Float[Array, "3"], l: Float[Array, "3"], samples: Float[Array, "N 2"],
-                  field: DistanceField) -> Float[Array, " N"]:
-    """Parameters (knot units) of the outline's points closest to the transferred
-    samples ``W(v, l) x_i`` (whole-outline search, no gradient): the hints of a solve
-    started at ``(v, l)``."""
-    return jax.vmap(closest_parameter, in_axes=(None, 0))(field, transfer(homology_matrix(v, l), samples))
-
-
-
-# The per-view fit lives in sorjax.core (which imports the maths above): imported after them.
+# The maths (sorjax.core._symmetry) and the per-view fit (sorjax.core._viewfit).
+from .core._symmetry import homology_matrix, symmetry_checked, symmetry_feet, symmetry_residuals, transfer  # noqa: E402,F401
+from ._compile import one_off_jit  # noqa: E402
 from .core._options import Options  # noqa: E402
 from .core._prepare import prepare_views  # noqa: E402
 from .core._viewfit import fit_view, pixel_homology  # noqa: E402
@@ -193,7 +144,7 @@ from .core._viewfit import fit_view, pixel_homology  # noqa: E402
 DEFAULT_SAMPLES = Options().n_samples
 
 
-@functools.partial(jax.jit, static_argnames=("options", "smooth"))
+@functools.partial(one_off_jit, static_argnames=("options", "smooth"))
 def _fit_core(points, init, options, smooth):
     """Prepare one outline (pixels), fit it and express the fit in pixels."""
     views = prepare_views(points[None], options.n_samples, smooth)

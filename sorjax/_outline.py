@@ -22,7 +22,8 @@ from jaxtyping import Array, Float
 from ._checks import MAX_POINTS as MAX_RESAMPLED
 from ._checks import MIN_POINTS as MIN_RESAMPLED
 from ._checks import integer
-from ._field import gaussian_smooth_closed
+from ._curves import _segments_cross, perimeter, resample_closed, signed_area  # noqa: F401
+from .core._field import gaussian_smooth_closed
 
 DEFAULT_POINTS = 2048
 MIN_POINTS = 10
@@ -48,50 +49,6 @@ class Outline(eqx.Module):
 
     def area(self) -> Float[Array, ""]:
         return signed_area(self.points)
-
-
-def _xp(p):
-    """numpy for numpy input (no JAX dispatch at the boundary), else jax.numpy."""
-    return np if isinstance(p, np.ndarray) else jnp
-
-
-def signed_area(p) -> Float[Array, ""]:
-    """Shoelace area of a closed polygon (..., M, 2); positive for our orientation."""
-    xp = _xp(p)
-    q = xp.roll(p, -1, axis=-2)
-    return 0.5 * xp.sum(p[..., 0] * q[..., 1] - q[..., 0] * p[..., 1], axis=-1)
-
-
-def perimeter(p) -> Float[Array, ""]:
-    """Length of a closed polygon (..., M, 2), closing edge included."""
-    xp = _xp(p)
-    return xp.sum(xp.linalg.norm(xp.roll(p, -1, axis=-2) - p, axis=-1), axis=-1)
-
-
-def _segments_cross(p: np.ndarray) -> bool:
-    """True when two non-adjacent edges of the closed polygon ``p`` (n, 2) cross."""
-    n = len(p)
-    if n > 200:  # decimate: loops smaller than ~1/200 of the outline are noise, not an error
-        p = p[np.linspace(0, n, 200, endpoint=False).astype(int)]
-        n = len(p)
-    a, b = p, np.roll(p, -1, axis=0)
-    d = b - a
-
-    def orient(o, dd, x):  # sign of cross(dd, x - o), broadcast (n, 1) vs (1, n)
-        return dd[:, None, 0] * (x[None, :, 1] - o[:, None, 1]) - dd[:, None, 1] * (
-            x[None, :, 0] - o[:, None, 0]
-        )
-
-    o1 = orient(a, d, a)
-    o2 = orient(a, d, b)
-    # segment i = (a_i, b_i), segment j = (a_j, b_j): they cross when a_j, b_j lie on
-    # opposite sides of line i and a_i, b_i on opposite sides of line j.
-    s1 = o1 * o2 < 0  # [i, j]: a_j and b_j straddle line i
-    s2 = s1.T  # [i, j]: a_i and b_i straddle line j
-    idx = np.arange(n)
-    gap = np.abs(idx[:, None] - idx[None, :])
-    adjacent = (gap <= 1) | (gap >= n - 1)
-    return bool(np.any(s1 & s2 & ~adjacent))
 
 
 def validate_points(points, *, name: str = "outline") -> np.ndarray:
@@ -202,29 +159,6 @@ def validate_points(points, *, name: str = "outline") -> np.ndarray:
     return arr
 
 
-def resample_closed(points: np.ndarray, n: int) -> np.ndarray:
-    """Resample a closed polyline (N, 2) to ``n`` points evenly spaced in arc length,
-    starting at its first point.
-
-    Between input points the curve is a cubic Hermite (Catmull-Rom) interpolant in
-    arc length, with tangents by central differences: it passes through every input
-    point, and for a smooth curve sampled at spacing ``h`` with radius ``R`` it stays
-    within about ``h^4 / R^3`` of it, where straight chords would cut ``h^2 / (8 R)``
-    inside.  (Arc length is measured along the chords.)"""
-    p = np.asarray(points, dtype=np.float64)
-    m = len(p)
-    h = np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1)  # segment i: p_i -> p_{i+1}
-    s = np.concatenate([[0.0], np.cumsum(h)])
-    tan = (np.roll(p, -1, axis=0) - np.roll(p, 1, axis=0)) / (h + np.roll(h, 1))[:, None]
-    t = np.linspace(0.0, s[-1], n, endpoint=False)
-    i = np.clip(np.searchsorted(s, t, side="right") - 1, 0, m - 1)
-    u = ((t - s[i]) / h[i])[:, None]
-    j = (i + 1) % m
-    hi = h[i][:, None]
-    h00, h10, h01, h11 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u, -2 * u**3 + 3 * u**2, u**3 - u**2
-    return h00 * p[i] + h10 * hi * tan[i] + h01 * p[j] + h11 * hi * tan[j]
-
-
 SPARSE_SPACING_PX = 3.0  # mean spacing above which a short outline is called sparse
 
 
@@ -309,7 +243,7 @@ def outline_of_pixel_trace(p: np.ndarray, *, name: str = "outline") -> np.ndarra
     half-pixel inward bias."""
     import cv2
 
-    from ._extract import _check_window, _outlines_from_field  # the mask path (that module imports this one)
+    from ._masks import _check_window, _outlines_from_field  # the mask path (that module imports this one)
 
     lo = np.floor(p.min(axis=0)).astype(np.int64) - 2
     W, H = (np.ceil(p.max(axis=0)).astype(np.int64) - lo + 3).tolist()
@@ -374,7 +308,7 @@ def point_jitter(p) -> float:
 
 def _smoothed(q: np.ndarray, sigma_points: float) -> np.ndarray:
     """The closed sequence ``q`` (N, 2) smoothed by a circular Gaussian of
-    ``sigma_points`` points in its index (:func:`sorjax._field.gaussian_smooth_closed`)."""
+    ``sigma_points`` points in its index (:func:`sorjax.core._field.gaussian_smooth_closed`)."""
     return np.asarray(gaussian_smooth_closed(jnp.asarray(q, jnp.float64), sigma_points))
 
 

@@ -253,7 +253,7 @@ def _views_from_images(args, labels: list[str]):
 
     import sorjax
 
-    from ._extract import command_line_hints
+    from ._masks import command_line_hints
 
     if args.masks and len(args.masks) != len(args.outlines):
         raise ValueError(f"--masks needs one mask per image: {len(args.outlines)} images, {len(args.masks)} masks")
@@ -385,7 +385,7 @@ def _calibrate(args) -> int:
     import sorjax
 
     from ._camera_io import write_camera
-    from ._compile_cache import enable_compilation_cache
+    from ._compile import enable_compilation_cache
 
     # the homology fit and the calibration compile for about 30 s on a CPU: kept on disk,
     # so that only a machine's first run pays for them (experiments do the same)

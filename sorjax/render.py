@@ -33,7 +33,7 @@ Conventions
   :func:`random_photo_set` whole calibration sets of them.
 * Lens distortion (``distortion=(k1, k2)``, default None: a pinhole camera, the same
   images as without the argument): OpenCV's radial model
-  (:mod:`sorjax._distortion`).  Each object's outline is its pinhole silhouette mapped
+  (:mod:`sorjax.core._distortion`).  Each object's outline is its pinhole silhouette mapped
   exactly through the distortion (:func:`sorjax.scenes.distort_outline`), so the
   coverages stay exact; the table, the wall and the objects' shading are sampled at
   each pixel's undistorted position (the inverse map, Newton steps), i.e. the distorted
@@ -310,7 +310,7 @@ def _pixel_grid(K, shape, k):
     xs, ys = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
     if k is None:
         return xs, ys
-    from ._distortion import undistort
+    from .core._distortion import undistort
 
     u = np.asarray(undistort(np.stack([xs, ys], axis=-1), K, k))
     return u[..., 0], u[..., 1]
@@ -638,7 +638,7 @@ def _distorter(K, kd):
     """Pinhole pixels -> distorted pixels (None without distortion)."""
     if kd is None:
         return None
-    from ._distortion import distort
+    from .core._distortion import distort
 
     return lambda uv: np.asarray(distort(np.asarray(uv, np.float64), K, np.asarray(kd, np.float64)))
 

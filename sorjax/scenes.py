@@ -75,10 +75,10 @@ Lens distortion
 Every scene function takes ``distortion=(k1, k2)`` (default None: a pinhole camera,
 every result as without the argument): OpenCV's radial model about the principal point
 in camera-normalised coordinates, ``m_d = (1 + k1 |m|^2 + k2 |m|^4) m``, ``x = K m_d``
-(:mod:`sorjax._distortion`).  A view's outline is then the pinhole silhouette mapped
+(:mod:`sorjax.core._distortion`).  A view's outline is then the pinhole silhouette mapped
 exactly through the distortion (the map is one-to-one where it is used: every pinhole
 outline point must lie within 0.9 of the model's monotone radius,
-:func:`sorjax._distortion.monotone_radius`, else ValueError), traced densely enough
+:func:`sorjax.core._distortion.monotone_radius`, else ValueError), traced densely enough
 that the distorted points are still at most ``spacing`` apart;
 :attr:`ViewTruth.outline_pinhole` keeps the pinhole outline, and ``l_s``, ``v_x``, ``W``
 are those of the pinhole image (the distortion-free model the calibration estimates).
@@ -99,6 +99,8 @@ from dataclasses import dataclass, field
 from typing import Callable, Sequence, Union
 
 import numpy as np
+
+from ._curves import _check_outline, closest_points_on_polyline
 
 __all__ = [
     "distance_to_polyline",
@@ -851,11 +853,11 @@ def _check_distortion(distortion):
 
 def distort_outline(outline, K, distortion, what: str = "outline") -> np.ndarray:
     """Pinhole outline points (M, 2, pixels) mapped through the radial distortion
-    ``(k1, k2)`` about ``K``'s principal point (:func:`sorjax._distortion.distort`,
+    ``(k1, k2)`` about ``K``'s principal point (:func:`sorjax.core._distortion.distort`,
     exact), point ``i`` the image of point ``i``.  Raises ValueError when a
     point lies beyond 0.9 of the model's monotone radius (where it folds or is close
     to folding: no longer a one-to-one, invertible image)."""
-    from ._distortion import distort, monotone_radius
+    from .core._distortion import distort, monotone_radius
 
     K = _check_K(K)
     k = _check_distortion(distortion)
@@ -1671,47 +1673,11 @@ def random_sor_scene(
 # ----------------------------------------------------------------------------------
 
 
-def _check_outline(outline) -> np.ndarray:
-    x = np.asarray(outline, dtype=np.float64)
-    if x.ndim != 2 or x.shape[1] != 2 or len(x) < 3:
-        raise ValueError(f"outline must be an (M, 2) array with M >= 3, got shape {x.shape}")
-    if not np.all(np.isfinite(x)):
-        raise ValueError("outline contains non-finite values")
-    return x
-
-
 def _check_sigma(sigma) -> float:
     sigma = float(sigma)
     if not (np.isfinite(sigma) and sigma >= 0):
         raise ValueError(f"sigma must be a finite number >= 0 (pixels), got {sigma}")
     return sigma
-
-
-def closest_points_on_polyline(points, polyline, chunk: int = 256) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The nearest point of the closed polyline ``polyline`` (M, 2) to each of ``points``
-    (K, 2), searched exhaustively over its M segments (O(K M), in chunks of ``chunk``
-    points): ``(foot (K, 2), segment (K,) int, t (K,))``, the foot being
-    ``polyline[segment] + t (polyline[segment + 1] - polyline[segment])`` with ``t`` in
-    [0, 1] (the segment after the last vertex closes the polyline).  Units are the
-    points' (pixels).  Raises ``ValueError`` for a polyline that is not an (M, 2) array
-    of M >= 3 finite points, or points that are not finite (x, y) pairs."""
-    pts = np.asarray(points, dtype=np.float64)
-    if pts.size % 2 or not np.all(np.isfinite(pts)):
-        raise ValueError(f"points must be finite (x, y) pairs (an (K, 2) array), got shape {pts.shape}")
-    pts = pts.reshape(-1, 2)
-    a = _check_outline(polyline)
-    ab = np.roll(a, -1, axis=0) - a
-    L2 = np.maximum(np.sum(ab * ab, axis=1), 1e-300)
-    seg = np.empty(len(pts), dtype=np.intp)
-    tt = np.empty(len(pts))
-    for s in range(0, len(pts), chunk):
-        ap = pts[s : s + chunk, None, :] - a[None]
-        t = np.clip(np.sum(ap * ab[None], -1) / L2[None], 0.0, 1.0)
-        d = ap - t[..., None] * ab[None]
-        k = np.argmin(np.sum(d * d, -1), axis=1)
-        seg[s : s + chunk] = k
-        tt[s : s + chunk] = t[np.arange(len(k)), k]
-    return a[seg] + tt[:, None] * ab[seg], seg, tt
 
 
 def distance_to_polyline(points, polyline, chunk: int = 256) -> np.ndarray:

@@ -24,6 +24,7 @@ from hypothesis import strategies as st
 
 import sorjax
 from sorjax import _extract as E
+from sorjax import _masks as M
 from sorjax import scenes
 from sorjax._files import atomic_folder, atomic_path, check_output, safe_name, write_text
 from sorjax.cli import main
@@ -330,13 +331,13 @@ def test_outlines_from_crops_equal_those_of_the_whole_mask(cx, cy, r, soft, smoo
     m = _disc_mask(centre=(cx, cy), radius=r, soft=soft)
     if second:
         m = np.maximum(m, _disc_mask(centre=(300 - cx, 200 - cy), radius=0.6 * r, soft=soft))
-    field = E._as_field(m, None)
+    field = M._as_field(m, None)
 
     def outlines(crop):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             try:
-                return E._outlines_from_field(field, min_area=10.0, smooth=smooth, border=border, crop=crop)
+                return M._outlines_from_field(field, min_area=10.0, smooth=smooth, border=border, crop=crop)
             except ValueError as e:
                 return str(e)
 
@@ -398,7 +399,7 @@ def test_a_huge_mask_with_one_small_object_costs_little_beyond_itself():
 
 
 def test_object_regions_above_the_pixel_limit_are_refused(monkeypatch):
-    monkeypatch.setattr(E, "MAX_WINDOW_PIXELS", 10_000)
+    monkeypatch.setattr("sorjax._masks.MAX_WINDOW_PIXELS", 10_000)  # the mask path's limit
     with pytest.raises(ValueError, match=r"at most 0 Mpx.*Downsample"):
         sorjax.outlines_from_mask(_disc_mask())
 

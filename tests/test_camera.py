@@ -3,7 +3,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sorjax._camera import (
+from sorjax.core._camera import (
     angle_between_planes,
     intrinsics_from_omega_vector,
     intrinsics_matrix,

@@ -1,5 +1,5 @@
 """The linear methods and the bundle as pure functions of masked, fixed-shape arrays
-(sorjax._linear.linear_estimate, sorjax._bundle.bundle_seeds / fit_bundle /
+(sorjax.core._linear.linear_estimate, sorjax.core._bundle.bundle_seeds / fit_bundle /
 bundle_estimate): exact on a noise-free scene, blind to masked views, the same under
 jit(vmap) as one trial at a time, and at a stationary point of the cost.
 
@@ -15,9 +15,9 @@ import pytest
 
 import sorjax
 from sorjax import scenes
-from sorjax._bundle import bundle_estimate, bundle_seeds, make_problem, residuals
-from sorjax._camera import transform_points
-from sorjax._linear import LINEAR_METHODS, linear_estimate, linear_estimates
+from sorjax.core._bundle import bundle_estimate, bundle_seeds, make_problem, residuals
+from sorjax.core._camera import transform_points
+from sorjax.core._linear import LINEAR_METHODS, linear_estimate, linear_estimates
 from sorjax.core import Options, joint_transform
 
 F = 700.0

@@ -13,7 +13,7 @@ import pytest
 
 import sorjax
 from sorjax import scenes
-from sorjax._camera import angle_between_planes, angle_between_rays
+from sorjax.core._camera import angle_between_planes, angle_between_rays
 from sorjax.core import Options, prepare_views
 from sorjax.core._viewfit import (N_STARTS, _pack, _residuals, automatic_starts, fit_view, fit_views,
                                   homologies_in_pixels)

@@ -1,4 +1,4 @@
-"""sorjax._distortion: OpenCV's radial model (k1, k2) and its Newton inverse, against
+"""sorjax.core._distortion: OpenCV's radial model (k1, k2) and its Newton inverse, against
 cv2.projectPoints / cv2.undistortPoints, against each other, and differentiated."""
 
 import cv2
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sorjax import scenes
-from sorjax._distortion import (distort, distort_normalised, monotone_radius, opencv_coefficients, undistort,
+from sorjax.core._distortion import (distort, distort_normalised, monotone_radius, opencv_coefficients, undistort,
                                 undistort_normalised)
 
 K = np.array([[620.0, 0.0, 331.0], [0.0, 610.0, 236.0], [0.0, 0.0, 1.0]])

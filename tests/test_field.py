@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from sorjax import scenes
-from sorjax._field import _argmin, _nearest_knot, curve, make_field, signed_distance, signed_distances
+from sorjax.core._field import _argmin, _nearest_knot, curve, make_field, signed_distance, signed_distances
 from sorjax._outline import make_outline
 
 A, B, CX, CY = 150.0, 90.0, 320.0, 240.0
@@ -53,7 +53,7 @@ def test_hinted_search_matches_the_whole_outline_search_near_its_hint():
     finds the same point (value and gradient); a hint on the far side of the outline
     gives another point, farther away, which is what the solvers' staleness test
     (residuals compared with whole-outline ones) catches."""
-    from sorjax._field import NEAR_WINDOW, SEARCH_KNOTS, closest_parameter
+    from sorjax.core._field import NEAR_WINDOW, SEARCH_KNOTS, closest_parameter
 
     field = ellipse_field(n=2048)
     m = field.n_knots
@@ -80,7 +80,7 @@ def test_checked_distances_are_the_whole_and_the_near_search_in_one_pass():
     solve's hints, bit for bit as the three separate evaluations give them (also where
     a hint is stale; to round-off: a program of its own), and the same gradient in
     the points."""
-    from sorjax._field import checked_distances, closest_parameter
+    from sorjax.core._field import checked_distances, closest_parameter
 
     field = ellipse_field(n=2048)
     m = field.n_knots
@@ -104,10 +104,10 @@ def test_checked_distances_are_the_whole_and_the_near_search_in_one_pass():
 
 
 def test_computed_as_has_the_value_given_and_the_derivative_of_its_function():
-    """:func:`sorjax._solvers.computed_as`: a value computed elsewhere (a solver's loop)
+    """:func:`sorjax.core._solvers.computed_as`: a value computed elsewhere (a solver's loop)
     keeps its value and differentiates as the function that computes it (jvp, grad,
     under jit); the function is not traced unless differentiated."""
-    from sorjax._solvers import computed_as
+    from sorjax.core._solvers import computed_as
 
     traced = []
 
@@ -130,7 +130,7 @@ def test_whole_outline_search_finds_the_closest_point_near_sharp_corners():
     step each side it did not, and the Newton steps settled on a wrong foot point).
     Against a brute-force search over every knot, points scattered 3 px around the
     corners of a star-shaped outline (ten 36-degree spikes)."""
-    from sorjax._field import _argmin, _newton_foot, closest_parameter
+    from sorjax.core._field import _argmin, _newton_foot, closest_parameter
 
     k = np.arange(4000)
     ang = 2 * np.pi * k / 4000

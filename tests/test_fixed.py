@@ -12,7 +12,7 @@ import pytest
 
 import sorjax
 from sorjax import scenes
-from sorjax._linear import focal_from_principal_point
+from sorjax.core._linear import focal_from_principal_point
 from sorjax.core._calibrate import views_needed
 
 CENTRE = (319.5, 239.5)  # OpenCV's image centre of a 640 x 480 image: ((w - 1) / 2, (h - 1) / 2)

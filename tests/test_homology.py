@@ -7,7 +7,7 @@ import pytest
 
 import sorjax
 from sorjax import scenes
-from sorjax._camera import angle_between_planes, angle_between_rays
+from sorjax.core._camera import angle_between_planes, angle_between_rays
 from sorjax._homology import homology_matrix, symmetry_residuals, transfer
 from sorjax.losses import distance_field, outline_samples, sample_weights
 

@@ -8,8 +8,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sorjax._camera import normalising_transform
-from sorjax._linear import method_i, method_ii, pole_polar_rows
+from sorjax.core._camera import normalising_transform
+from sorjax.core._linear import method_i, method_ii, pole_polar_rows
 
 
 def exact_views(K, n_views, rng):

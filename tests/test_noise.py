@@ -1,11 +1,11 @@
-"""The outline noise model's moment matching (sorjax._noise) against the dense formula."""
+"""The outline noise model's moment matching (sorjax.core._noise) against the dense formula."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sorjax import _noise as nz
+from sorjax.core import _noise as nz
 
 
 def _dense_moments(geo, J, ell_min, ell_max):

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 # 5 randomly perturbed circles (an odd count: padded to 6 on 2 devices), their fields
-# and the signed distances of fixed probe points: sorjax._field.setup +
-# sorjax._field.signed_distances, one trial per circle.
+# and the signed distances of fixed probe points: sorjax.core._field.setup +
+# sorjax.core._field.signed_distances, one trial per circle.
 _STUDY = textwrap.dedent(
     """
     import json, sys
@@ -22,7 +22,7 @@ _STUDY = textwrap.dedent(
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp, numpy as np
     from sorjax import core
-    from sorjax._field import setup, signed_distances
+    from sorjax.core._field import setup, signed_distances
 
     rng = np.random.default_rng(3)
     t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
@@ -86,7 +86,7 @@ def test_host_threads_split_gives_the_same_numbers():
     import jax.numpy as jnp
 
     from sorjax import core
-    from sorjax._field import setup, signed_distances
+    from sorjax.core._field import setup, signed_distances
 
     jax.config.update("jax_enable_x64", True)
     rng = np.random.default_rng(5)

@@ -9,16 +9,37 @@ a batch of calibrations stacks; thresholds live in :class:`Options` (static).
 
 :func:`sorjax.calibrate` is the friendly shell over this core: validation, warnings,
 messages.
+
+The modules, in the order of the data flow (each imports only those before it;
+``tests/test_layout.py`` holds the layers): ``_options``; the geometry ``_camera``,
+``_distortion``, ``_field``, ``_symmetry``, ``_solvers``; the per-view fit
+``_prepare``, ``_noise``, ``_viewfit``; the linear methods ``_linear``; the bundle
+``_bundle``; checks and uncertainty ``_assess``, ``_checks``, ``_result``; the
+calibration ``_calibrate``; and ``_shard`` for studies over devices.  The public
+names below are loaded on first use (PEP 562), so that a module importing the
+geometry does not load the estimator.
 """
 
-from ._calibrate import calibrate as calibrate, calibrate_homologies as calibrate_homologies
-from ._calibrate import calibrate_methods as calibrate_methods, fit_homologies as fit_homologies
-from ._checks import ModelChecks as ModelChecks
-from ._options import Options as Options
-from ._prepare import Views as Views, joint_transform as joint_transform, prepare_views as prepare_views
-from ._result import RESULTS as RESULTS, CoreResult as CoreResult
-from ._shard import TrialSharder as TrialSharder, compile_together as compile_together
-from ._shard import host_threads as host_threads, sharded_vmap as sharded_vmap
-from ._viewfit import ViewFit as ViewFit, ViewHomologies as ViewHomologies, fit_view as fit_view
-from ._viewfit import fit_views as fit_views, homologies_in_pixels as homologies_in_pixels
-from ._viewfit import with_noise_floor as with_noise_floor
+import importlib as _importlib
+
+_EXPORTS = {
+    "calibrate": "_calibrate", "calibrate_homologies": "_calibrate", "calibrate_methods": "_calibrate",
+    "fit_homologies": "_calibrate", "ModelChecks": "_checks", "Options": "_options", "Views": "_prepare",
+    "joint_transform": "_prepare", "prepare_views": "_prepare", "RESULTS": "_result", "CoreResult": "_result",
+    "TrialSharder": "_shard", "compile_together": "_shard", "host_threads": "_shard", "sharded_vmap": "_shard",
+    "ViewFit": "_viewfit", "ViewHomologies": "_viewfit", "fit_view": "_viewfit", "fit_views": "_viewfit",
+    "homologies_in_pixels": "_viewfit", "with_noise_floor": "_viewfit",
+}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name):
+    if name in _EXPORTS:
+        value = getattr(_importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_EXPORTS))

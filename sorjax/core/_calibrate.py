@@ -21,10 +21,10 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .._bundle import (DISTORTION_MODELS, BundleProblem, bundle_estimate, bundle_estimate_distorted, bundle_seeds,
+from ._bundle import (DISTORTION_MODELS, BundleProblem, bundle_estimate, bundle_estimate_distorted, bundle_seeds,
                        distortion_gate, linearised_covariance, make_problem)
-from .._camera import intrinsics_matrix, transform_points
-from .._linear import linear_estimate
+from ._camera import intrinsics_matrix, transform_points
+from ._linear import linear_estimate
 from ._assess import (DUPLICATE, USED, assess, axes_intersection, outline_extent, outline_radius,
                       principal_point_determined,
                       perspective_gate, view_verdicts)
@@ -63,7 +63,7 @@ def calibrate(points: Float[Array, "V M 2"], method: str = "bundle", aspect=jnp.
         valid: (V,) bool, views to consider (False: padding, left out); default all.
         distortion: the lens model of the bundle (static): "none" (a pinhole), "k1"
             or "k1k2" (OpenCV's radial terms, estimated with the intrinsics:
-            :func:`sorjax._bundle.bundle_estimate_distorted`; the bundle only).
+            :func:`sorjax.core._bundle.bundle_estimate_distorted`; the bundle only).
         fixed: (4,) intrinsics held at known values, ``(fu, fv, u0, v0)`` px with NaN
             where free (OpenCV's fixed-parameter flags: a principal point, a focal
             length), or None (all free; the program traced before fixed parameters
@@ -78,14 +78,14 @@ def calibrate(points: Float[Array, "V M 2"], method: str = "bundle", aspect=jnp.
             estimate of the noise level (covariance, model checks, perspective and
             distortion evidence, the solver's stopping test, whether a view's ``v_x``
             is at infinity: :func:`sorjax.core.with_noise_floor`) takes each view's
-            residuals as at least this (:attr:`sorjax._bundle.BundleProblem.noise`);
+            residuals as at least this (:attr:`sorjax.core._bundle.BundleProblem.noise`);
             the cost, and so the estimate of ``K``, is the same.
         noise_ell: (V,) the correlation length along the curve (px) of the noise
             behind each floor (:attr:`sorjax.Homology.noise_ell` of the outline before
             it was averaged; 0 or NaN: unknown), or None.  Where a floor binds, the
             covariance takes this as the view's noise correlation length instead of
             reading one off residuals that no longer show the noise
-            (:attr:`sorjax._bundle.BundleProblem.noise_ell`).  Without ``noise`` no
+            (:attr:`sorjax.core._bundle.BundleProblem.noise_ell`).  Without ``noise`` no
             floor binds, and it has no effect.
     """
     homs = fit_homologies(points, options)
@@ -162,8 +162,8 @@ def _bundle(c: _Common, homs: ViewHomologies, aspect, options: Options, fixed=No
 
 
 def _distorted(c: _Common, homs: ViewHomologies, aspect, options: Options, distortion: str, fixed=None):
-    """The bundle with radial distortion (:func:`sorjax._bundle.bundle_estimate_distorted`)
-    and the evidence gate for it (:func:`sorjax._bundle.distortion_gate`: the fit with
+    """The bundle with radial distortion (:func:`sorjax.core._bundle.bundle_estimate_distorted`)
+    and the evidence gate for it (:func:`sorjax.core._bundle.distortion_gate`: the fit with
     ``k = 0`` must be worse by the noise and by the declared outline error).  Returns
     ``(BundleOut, (k (2,), k_std (2,), g_px, z))``: with the evidence, the fit with
     distortion; without it, the distortion-free fit with its covariance widened by
@@ -399,7 +399,7 @@ def _no_checks(aspect, c: _Common, options: Options) -> ModelChecks:
 def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image_size, options: Options, bundle=None,
             linear=None, free=None, distortion=None, fixed=None) -> CoreResult:
     """The verdicts and the result of one method's estimate (``bundle``: a
-    :class:`sorjax._bundle.BundleOut` and its views' scores, ``free`` the same of the
+    :class:`sorjax.core._bundle.BundleOut` and its views' scores, ``free`` the same of the
     free-aspect fit; ``linear``: ``(K, omega, ok, cov_unit)``; ``fixed``: the
     intrinsics the bundle held fixed, px, or None)."""
     if linear is not None:

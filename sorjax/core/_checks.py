@@ -22,7 +22,7 @@ at the edge (:mod:`sorjax._calibration`).
    parameters instead of 2) and the score (Lagrange multiplier) statistic of that
    release is computed at the joint optimum, ``S_j = g_j^T M_j^+ g_j`` with ``g_j =
    J_j^T r_j`` and ``M_j`` the correlated-noise covariance of ``g_j`` (the bundle's
-   outline noise model, :func:`sorjax._bundle.noise_blocks`).  No
+   outline noise model, :func:`sorjax.core._bundle.noise_blocks`).  No
    extra solve: one Jacobian of 4 columns per view.  ``S = sum_j S_j`` is compared
    with a chi-square of ``2 V - 4`` degrees of freedom (``2 V - 3`` with a known
    aspect ratio); ``delta_j = g_j^T (J_j^T J_j)^+ g_j`` (px^2, one Gauss-Newton step's
@@ -60,11 +60,11 @@ import jax.numpy as jnp
 from jax.scipy.special import gammaincc
 from jaxtyping import Array, Bool, Float, Int
 
-from .._bundle import (BundleProblem, fixed_chart, floored_rss, foot_parameters, free_intrinsics, make_problem,
+from ._bundle import (BundleProblem, fixed_chart, floored_rss, foot_parameters, free_intrinsics, make_problem,
                        noise_blocks, pin_intrinsics, pixel_params, pole_polar_pairs, problem_normals, project_out,
                        residual_jacobian, residual_variance, with_model)
-from .._homology import symmetry_residuals
-from .._noise import jacobian_and_normal_sensitivity, noise_meat
+from ._symmetry import symmetry_residuals
+from ._noise import jacobian_and_normal_sensitivity, noise_meat
 from ._options import Options
 
 # ModelChecks.verdict
@@ -175,9 +175,9 @@ def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=N
     each view's number of samples counted (sum of weights); NaN / 0 for views not
     used.  ``fixed`` (4,): intrinsics held fixed (px, NaN: free; None: none), which
     the joint model then does not count among its parameters.  ``base``: the
-    calibration's shared problem (:func:`sorjax._bundle.with_model`), or None (built).
+    calibration's shared problem (:func:`sorjax.core._bundle.with_model`), or None (built).
     ``ell``: (V,) each view's outline noise correlation length (px), the bundle's
-    :attr:`~sorjax._bundle.BundleOut.noise_ell`."""
+    :attr:`~sorjax.core._bundle.BundleOut.noise_ell`."""
     fixed_n = None if fixed is None else fixed_chart(fixed, T)
     problem = (make_problem(points_n, options.n_samples, aspect, inliers, used, fixed_n) if base is None
                else with_model(base, aspect, fixed_n))
@@ -202,7 +202,7 @@ def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=N
 
     # one forward-mode pass per view: the releases' Jacobian (V, N, 4), the residuals
     # (V, N) and their sensitivity to their samples moving along the normals (the noise
-    # model's geometry, :func:`sorjax._bundle.noise_geometry_at`)
+    # model's geometry, :func:`sorjax.core._bundle.noise_geometry_at`)
     J, r, a_nu = jax.vmap(one)(v, l, problem.samples, problem.fields, problem.weights, feet, problem_normals(problem))
     n = jnp.sum(problem.weights, axis=1)
     n_par = jnp.sum(used) * 2 + n_free_intrinsics(aspect, fixed)
@@ -221,7 +221,7 @@ def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=N
 def n_free_intrinsics(aspect, fixed=None):
     """How many of ``(fu, fv, u0, v0)`` the bundle estimates: 4 with a free aspect
     ratio, 3 with a known one, less those held fixed (``fixed`` (4,) px, NaN: free;
-    :func:`sorjax._bundle.free_intrinsics`)."""
+    :func:`sorjax.core._bundle.free_intrinsics`)."""
     if fixed is None:
         return jnp.where(jnp.isnan(aspect), 4, 3)
     return jnp.sum(free_intrinsics(aspect, fixed)).astype(jnp.int32)
@@ -311,7 +311,7 @@ def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, opt
     held ones).  Columns of the Jacobian ``J = [J_h, J_r]`` (held, released) at ``y``:
     ``G = J_r - J_h (J_h^T J_h)^+ J_h^T J_r``, ``g = G^T r`` (``= J_r^T r`` at the held
     model's optimum), ``S = g^T M^+ g`` with ``M = G^T Sigma_r G`` the outline noise
-    model's ``Var(g)`` (:func:`sorjax._bundle.noise_blocks`, correlation length ``ell``
+    model's ``Var(g)`` (:func:`sorjax.core._bundle.noise_blocks`, correlation length ``ell``
     px, one or (V,) one per view), ``p = P(chi2_q > S)``;
     the Gauss-Newton step of the released model ``-(J^T J)^+ J^T r`` gives ``shift``
     and ``released``.  No solve: one Jacobian."""
@@ -342,10 +342,10 @@ def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, opt
 def lens_release(y, points_n, used, inliers, aspect, T, options: Options, fixed=None, base=None, *, ell) -> Release:
     """:func:`release_score` of the radial distortion ``k1`` that the pinhole bundle's
     solution ``y = (k (4,), a)`` holds at 0 (the model of
-    :func:`sorjax._bundle.distorted_transfer` with one coefficient; ``fixed``: the
+    :func:`sorjax.core._bundle.distorted_transfer` with one coefficient; ``fixed``: the
     intrinsics held fixed, px, or None); ``released[-1]`` is the ``k1`` one
     Gauss-Newton step gives.  ``base``: the calibration's problem
-    (:func:`sorjax._bundle.with_model`), or None to build it; ``ell`` as
+    (:func:`sorjax.core._bundle.with_model`), or None to build it; ``ell`` as
     :func:`release_score`'s."""
     fixed_n = None if fixed is None else fixed_chart(fixed, T)
     pinhole = (make_problem(points_n, options.n_samples, aspect, inliers, used, fixed_n) if base is None

@@ -1,7 +1,7 @@
 """Prepare: outline points (V, M, 2) in pixels -> normalisation, fields, samples, weights.
 
 Two coordinate systems, both isotropic similarities of the pixels
-(:func:`sorjax._camera.normalising_transform`: centroid at the origin, RMS radius
+(:func:`sorjax.core._camera.normalising_transform`: centroid at the origin, RMS radius
 sqrt 2):
 
 * per view, ``T_j`` of that outline alone: the per-view fit (eq. 20) runs there;
@@ -19,8 +19,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
-from .._camera import normalising_transform, transform_points
-from .._field import DistanceField, setup
+from ._camera import normalising_transform, transform_points
+from ._field import DistanceField, setup
 
 
 class Views(eqx.Module):
@@ -29,7 +29,7 @@ class Views(eqx.Module):
     Attributes:
         T: (V, 3, 3) per-view normalising similarities, ``x_n = T_j x`` (pixels in).
         points: (V, M, 2) the outlines' evenly spaced points, normalised.
-        fields: the stacked (V) :class:`sorjax._field.DistanceField` of ``points``.
+        fields: the stacked (V) :class:`sorjax.core._field.DistanceField` of ``points``.
         samples: (V, N, 2) eq. 20's samples ``x_i``, normalised.
         weights: (V, N) 0 at samples near a corner of the outline, else 1.
     """

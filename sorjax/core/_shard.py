@@ -194,14 +194,15 @@ class TrialSharder:
         return jax.make_array_from_callback(x.shape, self.sharding, lambda index: x[index])
 
 
-def compile_together(lowered: Sequence[Any]) -> list[Any]:
+def compile_together(lowered: Sequence[Any], compiler_options: dict | None = None) -> list[Any]:
     """Compile several traced programs (``jax.stages.Lowered``) side by side from host
     threads: XLA compiles one program mostly on one core, so a study split into
-    stages compiles in about the time of its largest stage."""
+    stages compiles in about the time of its largest stage.  ``compiler_options``:
+    XLA's options for each (None: its defaults)."""
     if len(lowered) <= 1:
-        return [lo.compile() for lo in lowered]
+        return [lo.compile(compiler_options) for lo in lowered]
     with ThreadPoolExecutor(max_workers=min(len(lowered), host_threads())) as pool:
-        return list(pool.map(lambda lo: lo.compile(), lowered))
+        return list(pool.map(lambda lo: lo.compile(compiler_options), lowered))
 
 
 def sharded_vmap(fn: Callable[..., Any], *batched_args):

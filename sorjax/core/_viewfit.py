@@ -26,7 +26,7 @@ starts compacted to the front and screened ``SCREEN_BLOCK`` per vmapped solve, i
 while loop that stops after the last valid one, so that the 36 conic slots cost
 nothing unless the outline is nearly conic), the lowest cost (the first of equal ones)
 is polished (Gauss-Newton, then Levenberg-Marquardt where that fails:
-:func:`sorjax._solvers.polish_traced`), then up to ``options.trim_rounds`` robust
+:func:`sorjax.core._solvers.polish_traced`), then up to ``options.trim_rounds`` robust
 rounds trim outlier samples (a handle, a shadow) and refit from the previous optimum,
 until the first round with nothing to trim (never below half of the samples).  The
 polish and the refits are one while loop (its round 0 the polish of the screened
@@ -53,11 +53,11 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
-from .._field import DistanceField
-from .._homology import homology_matrix, symmetry_checked, symmetry_feet, symmetry_residuals, transfer
-from .._noise import (estimate_noise, jacobian_and_normal_sensitivity, knot_spacing_px, noise_geometry, noise_meat,
+from ._field import DistanceField
+from ._symmetry import homology_matrix, symmetry_checked, symmetry_feet, symmetry_residuals, transfer
+from ._noise import (estimate_noise, jacobian_and_normal_sensitivity, knot_spacing_px, noise_geometry, noise_meat,
                       sample_normals, smoothed_outline, unit_blocks)
-from .._solvers import Solved, is_stale, polish_traced, solvers, until_fresh_traced
+from ._solvers import Solved, is_stale, polish_traced, solvers, until_fresh_traced
 from ._options import Options
 from ._prepare import Views
 
@@ -102,7 +102,7 @@ class ViewFit(eqx.Module):
             (normalised units).
         noise_ell: the correlation length along the curve (px) of the outline's noise,
             as the noise model behind ``infinity_z`` read it off the residuals
-            (:func:`sorjax._noise.estimate_noise`).
+            (:func:`sorjax.core._noise.estimate_noise`).
     """
 
     v: Float[Array, "3"]
@@ -275,8 +275,8 @@ def _screen(field, samples, weights, vs, ls, valid, options: Options):
 def _polish(field, samples, weights, p0, v0, E, cost0, feet0, options: Options) -> _Fit:
     """Polish one start ``p0`` (chart ``v0, E``; its cost ``cost0``, its closest-point
     parameters ``feet0``) with ``weights``: Gauss-Newton, then Levenberg-Marquardt
-    where that fails (:func:`sorjax._solvers.polish_traced`), each solve re-run while
-    its hints are stale (:func:`sorjax._solvers.until_fresh_traced`); every solve
+    where that fails (:func:`sorjax.core._solvers.polish_traced`), each solve re-run while
+    its hints are stale (:func:`sorjax.core._solvers.until_fresh_traced`); every solve
     starts from the closest points its start's solve ended with (no search of its
     own).  The cost is ``nan`` where ``cost0`` is not finite (no start had a finite
     cost)."""
@@ -454,9 +454,9 @@ def _outliers(r_px, active, keep, options: Options):
 def _infinity_z(field, samples, weights, v, l, feet, scale, options: Options):
     """``(z, ell)``: ``z = |v_3| / std(v_3)`` of eq. 20's fit at ``(v, l)`` in a chart centred there
     (``feet``: the closest-point parameters at ``(v, l)``; ``scale`` px per unit).
-    The covariance is the sandwich of :func:`sorjax._bundle.covariance` for one view:
+    The covariance is the sandwich of :func:`sorjax.core._bundle.covariance` for one view:
     the Jacobian read off the outline smoothed by ``options.covariance_smooth_px``,
-    the residuals' covariance from the outline noise model of :mod:`sorjax._noise`
+    the residuals' covariance from the outline noise model of :mod:`sorjax.core._noise`
     (level and correlation length ``ell`` px from the residuals).  With ``s^2 (J^T J)^-1``
     instead, ``v_x``'s standard error came out about 1.6x too small on the paper's
     noise, so that views looking almost straight at the axis passed as finite
@@ -599,7 +599,7 @@ def with_noise_floor(homs: ViewHomologies, noise, options: Options = Options()) 
     is higher (the standard error of ``v_3`` grows with the noise level), and
     ``at_infinity`` and ``is_conic`` decided again from it.  For outlines averaged with
     their own mirror image, whose residuals no longer show their noise
-    (:attr:`sorjax._bundle.BundleProblem.noise`): their ``v_x`` would otherwise pass as
+    (:attr:`sorjax.core._bundle.BundleProblem.noise`): their ``v_x`` would otherwise pass as
     finite far too easily.  ``rms`` itself is left as fitted.
 
     The scaling keeps the noise's correlation length that the fit read off the
@@ -609,7 +609,7 @@ def with_noise_floor(homs: ViewHomologies, noise, options: Options = Options()) 
     (median 1.4) the raw outline's own,
     which errs towards a finite ``v_x``.  It decides only the only-principal-point
     verdict (every view at infinity); the bundle's covariance takes the floor's own
-    length (:attr:`sorjax._bundle.BundleProblem.noise_ell`)."""
+    length (:attr:`sorjax.core._bundle.BundleProblem.noise_ell`)."""
     noise = jnp.asarray(noise, jnp.float64)
     higher = noise > homs.rms
     z = homs.infinity_z * jnp.where(higher, homs.rms / jnp.where(higher, noise, 1.0), 1.0)

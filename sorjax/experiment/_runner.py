@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._compile_cache import enable_compilation_cache as enable_compilation_cache
+from .._compile import enable_compilation_cache as enable_compilation_cache
 from .._files import absolute, atomic_folder, check_folder, safe_name
 from ._config import Config
 from ._report import error_figures, records_csv, reference_lines, scene_figure, summarise, table_markdown

@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import core, scenes
+from .._compile import options_for_runs
 from .._calibration import code_name, view_notes, verdict_notes
 from .._outline import is_jagged, resample_closed, signed_area, smooth_jagged
 from ._config import Config, SceneConfig
@@ -118,9 +119,13 @@ class TrialProgram:
     compiled side by side (:func:`sorjax.core.compile_together`: XLA compiles one
     program on one core); on one CPU device each chunk's parts run side by side from
     host threads, fits then methods (:class:`sorjax.core.TrialSharder`).  Reuse the
-    instance for every chunk of a run."""
+    instance for every chunk of a run.  ``compiler_options``: XLA's options for both
+    stages (None: XLA's defaults; :func:`run_batch` picks
+    :func:`sorjax._compile.options_for_runs` of its trial count: a short run is
+    compile-bound)."""
 
-    def __init__(self, cfg: Config):
+    def __init__(self, cfg: Config, compiler_options: dict | None = None):
+        self.compiler_options = compiler_options
         self.methods = tuple(cfg.methods)
         self.options = options = options_for(cfg)
         names = tuple(_method_args(m)[0] for m in self.methods)
@@ -149,7 +154,7 @@ class TrialProgram:
                                 fits.out_info)
             cals = self.calibrations.lower(*part, homs)
             t1 = time.perf_counter()
-            exes = core.compile_together([fits, cals])
+            exes = core.compile_together([fits, cals], self.compiler_options)
             self.fits.adopt(part, exes[0])
             self.calibrations.adopt((*part, homs), exes[1])
             self._homs[key] = homs
@@ -204,8 +209,10 @@ def records_from(cfg: Config, recs: list[dict], homs, results: dict, seconds: fl
 def run_batch(cfg: Config, tasks: list[tuple[int, dict, int]], program: TrialProgram | None = None,
               chunk: int = 64, on_chunk=None) -> list[dict]:
     """Run ``(row_index, row, trial)`` tasks in chunks of ``chunk`` trials (the last
-    padded, one compiled program per shape); ``on_chunk(n)`` after each chunk."""
-    program = TrialProgram(cfg) if program is None else program
+    padded, one compiled program per shape); ``on_chunk(n)`` after each chunk.  The
+    program (when not given) is compiled for a short compile when the run is short
+    (:func:`sorjax._compile.options_for_runs`: fewer than 200 trials)."""
+    program = TrialProgram(cfg, options_for_runs(len(tasks))) if program is None else program
     drawn = [draw_trial(cfg, r, row, t) for r, row, t in tasks]
     by_shape: dict[tuple, list[int]] = {}
     for i, (_, pts) in enumerate(drawn):

@@ -187,7 +187,7 @@ def closest_parameter_near(field: DistanceField, x: Float[Array, "2"], hint) -> 
     """:func:`closest_parameter` searched only near the parameter ``hint`` (a previous
     closest point: a solver's iterates move the transferred samples a few knots at a
     time).  The caller checks that the hint was near enough (see
-    :func:`sorjax._bundle.solve`)."""
+    :func:`sorjax.core._bundle.solve`)."""
     field = jax.lax.stop_gradient(field)
     x = jax.lax.stop_gradient(x)
     return _newton_foot(field, x, _nearest_knot_near(field, x, jax.lax.stop_gradient(hint)).astype(jnp.float64))

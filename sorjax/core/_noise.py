@@ -190,7 +190,7 @@ def estimate_noise(geo: NoiseGeometry, r: Float[Array, "V N"], J: Float[Array, "
     view's correlation length, px).  Residuals that are all zero give ``sigma_n^2 = 0``.
 
     ``floor`` (V,): each view's residual sum of squares counted as at least this
-    (``n_j noise_j^2``, a noise floor: :func:`sorjax._bundle.floored_rss`), or None.
+    (``n_j noise_j^2``, a noise floor: :func:`sorjax.core._bundle.floored_rss`), or None.
     ``floor_ell`` (V,): the correlation length (px) of the noise behind each floor
     (NaN or <= 0: unknown), or None.  A view whose floor binds (above its residuals'
     sum of squares) and whose floor's correlation length is known takes that length
@@ -229,7 +229,7 @@ def knot_spacing_px(field: DistanceField, scale) -> Float[Array, ""]:
 
 def sample_normals(field: DistanceField, n: int) -> Float[Array, "n 2"]:
     """Unit outward normals at the ``n`` samples ``t_i = i M / n`` of an outline
-    (:func:`sorjax._field.curve_points`), whichever way it runs."""
+    (:func:`sorjax.core._field.curve_points`), whichever way it runs."""
     k = field.knots
     area = 0.5 * jnp.sum(k[:, 0] * jnp.roll(k[:, 1], -1) - jnp.roll(k[:, 0], -1) * k[:, 1])
     t = jnp.arange(n) * (k.shape[0] / n)

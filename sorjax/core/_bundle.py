@@ -46,7 +46,7 @@ Uncertainty: at the optimum, the sandwich ``F^-1 G^T Sigma_r G F^-1`` of least s
 (``G`` the intrinsics' Jacobian columns with the per-view parameters projected out,
 read off the outlines smoothed by a few pixels; ``F = G^T G``), with ``Sigma_r`` the
 residuals' covariance under a model of the outline noise whose level and correlation
-length along the curve are estimated from the residuals (:mod:`sorjax._noise`), pushed
+length along the curve are estimated from the residuals (:mod:`sorjax.core._noise`), pushed
 to the pixel intrinsics ``(fu, fv, u0, v0)`` through the Jacobian of that map;
 intrinsics the views do not determine at all get an infinite variance (see
 :func:`covariance`).
@@ -68,12 +68,12 @@ from ._camera import intrinsics_matrix, omega_matrix, omega_vector_from_intrinsi
 from ._camera import pixel_intrinsics as _pixel_intrinsics
 from ._distortion import distort, undistort
 from ._field import DistanceField, checked_distances, closest_parameter, setup, signed_distances
-from ._homology import homology_matrix, symmetry_checked, symmetry_feet, symmetry_residuals, transfer
+from ._symmetry import homology_matrix, symmetry_checked, symmetry_feet, symmetry_residuals, transfer
 from ._linear import focal_from_principal_point, linear_estimates
 from ._noise import (NoiseGeometry, estimate_noise, jacobian_and_normal_sensitivity, knot_spacing_px, noise_geometry,
                      noise_meat, sample_normals, smoothed_outline, unit_blocks)
 from ._solvers import NULL_RCOND, Solved, computed_as, is_stale, polish_traced, solvers, until_fresh_traced
-from .core._options import Options
+from ._options import Options
 
 
 class BundleProblem(eqx.Module):
@@ -108,7 +108,7 @@ class BundleProblem(eqx.Module):
     ``noise_ell`` (V,): the correlation length along the curve (px) of the noise behind
     each floor (NaN or 0: unknown), or None.  A view whose floor binds takes it as its
     noise's correlation length; otherwise it is read off the residuals
-    (:func:`sorjax._noise.estimate_noise`), which for an averaged outline are smooth and
+    (:func:`sorjax.core._noise.estimate_noise`), which for an averaged outline are smooth and
     read as noise correlated over tens of pixels: standard deviations about 4x too
     large (``experiments/noise_floor.py``)."""
 
@@ -271,7 +271,7 @@ def distorted_transfer(y, problem: BundleProblem) -> Float[Array, "V N 2"]:
         x' = D(W u),   u = D^-1(x),   D(u) = K' d(K'^-1 u)
 
     ``x`` a sample of the observed (distorted) outline, ``D`` the radial distortion
-    :func:`sorjax._distortion.distort` about the principal point in camera-normalised
+    :func:`sorjax.core._distortion.distort` about the principal point in camera-normalised
     coordinates ``K'^-1 u`` (``K' = T K`` the intrinsics in the bundle's normalised
     frame: the similarity ``T`` cancels, and the coefficients are those of pixels),
     ``D^-1`` its Newton inverse, ``W`` the homology of the pinhole (undistorted) image.
@@ -311,7 +311,7 @@ def residuals(y, problem: BundleProblem, hints=None) -> Float[Array, " VN"]:
 
 def checked_residuals(y, problem: BundleProblem, hints=None):
     """:func:`residuals` at the end of a solve that searched closest points near
-    ``hints`` (V, N), in one pass (:func:`sorjax._field.checked_distances`): ``(r, feet,
+    ``hints`` (V, N), in one pass (:func:`sorjax.core._field.checked_distances`): ``(r, feet,
     r_near)``, the whole-outline residuals (VN,), their closest-point parameters (V, N)
     (:func:`foot_parameters`: the next solve's hints) and the residuals searched near
     ``hints`` (None: ``r`` again)."""
@@ -343,7 +343,7 @@ def _hinted_residuals(y, args):
     return residuals(y, problem, hints)
 
 
-# Solvers (:mod:`sorjax._solvers`): every seed was once screened by a few loose
+# Solvers (:mod:`sorjax.core._solvers`): every seed was once screened by a few loose
 # Levenberg-Marquardt steps, the best polished by Gauss-Newton.  Measured on the
 # two-sphere scene (40 trials each, unit aspect) against full Levenberg-Marquardt from
 # every seed: f = 700, sigma 1 px, 38 -> 25 ms a calibration, the same estimates (to
@@ -368,7 +368,7 @@ def solve(y0, problem: BundleProblem, max_steps: int = 200, method: str = "lm", 
     returns ``(y, result, steps, residuals, stale, feet)``.
 
     The solver's residuals search each closest point only near where it was at ``y0``
-    (:func:`foot_parameters`; :data:`sorjax._field.NEAR_WINDOW`): a third of the
+    (:func:`foot_parameters`; :data:`sorjax.core._field.NEAR_WINDOW`): a third of the
     distance computations of a whole-outline search, half the time of a step.  The
     returned residuals are searched over the whole outlines; ``stale`` is True when
     they differ from the solver's (a closest point moved out of its window during the
@@ -412,7 +412,7 @@ def orthographic_cost(y, problem: BundleProblem, max_steps: int = 100):
 
     Closest points are searched near where they were at the start, and the solve is
     repeated from its end should one of them leave its window (as in :func:`solve`;
-    traced: :func:`sorjax._solvers.until_fresh_traced`)."""
+    traced: :func:`sorjax.core._solvers.until_fresh_traced`)."""
     return _orthographic_fit(y, problem, max_steps)[0]
 
 
@@ -525,11 +525,11 @@ def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Optio
     ``(cov, s2, step, ell)`` with ``s2 = |r|^2 / (VN - p)`` (normalised units^2;
     each view's share at least its noise floor, :func:`floored_rss`),
     ``step`` the Gauss-Newton step's Mahalanobis length (:func:`step_sigmas`) and
-    ``ell`` (V,) each view's outline noise correlation length (px, :mod:`sorjax._noise`).
+    ``ell`` (V,) each view's outline noise correlation length (px, :mod:`sorjax.core._noise`).
 
     The sandwich ``F^-1 G^T Sigma_r G F^-1`` of least squares, with
     ``Sigma_r`` the residuals' covariance under the outline noise model of
-    :mod:`sorjax._noise` (its level and correlation length estimated from the
+    :mod:`sorjax.core._noise` (its level and correlation length estimated from the
     residuals; where a view's noise floor binds, its floor's length,
     :attr:`BundleProblem.noise_ell`) and ``G`` the intrinsics' columns of the Jacobian with the per-view
     pole-polar pairs' directions projected out, ``F = G^T G`` (the Schur complement
@@ -586,7 +586,7 @@ def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Optio
 
 def noise_blocks(problem: BundleProblem, feet, T, ell, s2, a) -> Float[Array, "V N N"]:
     """The residuals' covariance per view (normalised units^2) under the outline noise
-    model (:mod:`sorjax._noise`) with correlation length ``ell`` px, one or (V,) one per
+    model (:mod:`sorjax.core._noise`) with correlation length ``ell`` px, one or (V,) one per
     view (the bundle's, :attr:`BundleOut.noise_ell`), its level from the residual variance
     ``s2`` of the model fitted at ``y``: ``sigma_n^2 = s2 n / tr S`` (``n`` samples
     counted), ``a`` as for :func:`noise_geometry_at`.  What the model checks weigh
@@ -633,7 +633,7 @@ def _step_length(J, r, s2):
 def smoothed_problem(problem: BundleProblem, smooth_px, scale) -> BundleProblem:
     """``problem`` with every outline smoothed along the curve by a Gaussian of
     ``smooth_px`` px (``scale`` px per normalised unit,
-    :func:`sorjax._noise.smoothed_outline`): new fields and samples, the same weights.
+    :func:`sorjax.core._noise.smoothed_outline`): new fields and samples, the same weights.
     What :func:`covariance` reads the Jacobian from."""
     N = problem.samples.shape[1]
     fields, samples = jax.vmap(lambda f: smoothed_outline(f, N, smooth_px, scale))(problem.fields)
@@ -641,7 +641,7 @@ def smoothed_problem(problem: BundleProblem, smooth_px, scale) -> BundleProblem:
 
 
 def noise_geometry_at(problem: BundleProblem, feet, scale, a) -> NoiseGeometry:
-    """The outline noise model's geometry (:class:`sorjax._noise.NoiseGeometry`) of
+    """The outline noise model's geometry (:class:`sorjax.core._noise.NoiseGeometry`) of
     the residuals with closest-point parameters ``feet`` (V, N): ``a`` (V, N), each
     weighted residual's sensitivity to its own sample moving along the outward normal
     (:func:`residual_jacobian` with ``normals=True``), the weights and the arc lengths
@@ -661,7 +661,7 @@ def _placeholder_outline(m: int):
 def make_problem(points_n, n_samples: int, aspect=None, inliers=None, used=None, fixed=None,
                  noise=None, noise_ell=None) -> BundleProblem:
     """The :class:`BundleProblem` of (V, M, 2) normalised outline points: fields,
-    ``n_samples`` samples per view (:func:`sorjax._field.setup`), their corner weights
+    ``n_samples`` samples per view (:func:`sorjax.core._field.setup`), their corner weights
     times the optional (V, N) 0/1 ``inliers`` mask and the (V,) bool ``used`` mask (a
     masked view keeps its slot: a placeholder field, all weights zero); ``aspect`` the
     known ``fu / fv``, NaN or None (free); ``fixed`` (4,) the chart values of intrinsics
@@ -706,7 +706,7 @@ FALLBACK_FOCALS = (2.0, 5.0, 12.0)  # normalised units: the spread of cameras tr
 @jax.jit
 def bundle_seeds(v_pix, l_pix, used, T, aspect, fixed=None):
     """The bundle's intrinsic seeds (normalised units, :data:`SEED_BATCH` of them):
-    Methods IIa, IIb and I (:func:`sorjax._linear.linear_estimates`; IIb and I with
+    Methods IIa, IIb and I (:func:`sorjax.core._linear.linear_estimates`; IIb and I with
     the known aspect ratio, 1 for free), projected onto a known aspect ratio
     ``a = aspect`` (``fv = sqrt(fu fv / a)``, ``fu = a fv``; NaN: free), then the
     fallback spread ``(a f, f, 0, 0)`` for f in :data:`FALLBACK_FOCALS`, valid only
@@ -716,7 +716,7 @@ def bundle_seeds(v_pix, l_pix, used, T, aspect, fixed=None):
     none).  The seeds' fixed entries are replaced in the bundle itself
     (:func:`pin_intrinsics`); with the principal point fixed, the fourth seed (the
     first of the spread) is the focal length of
-    :func:`sorjax._linear.focal_from_principal_point` (the single-view case, valid
+    :func:`sorjax.core._linear.focal_from_principal_point` (the single-view case, valid
     whenever it is: one view suffices) at that principal point.
 
     Returns ``(seeds (6, 4), seed_ok (6,))``; a linear seed is valid when its method
@@ -753,8 +753,8 @@ def fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Optio
     start, accepted at its step limit when it is as good as stationary:
     :data:`STATIONARY_SIGMAS`); should that not converge either, the next seed, and so
     on.  Pure (jit / vmap): the ranking is one vmapped call, the seeds a
-    ``lax.while_loop``, the polish :func:`sorjax._solvers.polish_traced` with each
-    solve re-run while stale (:func:`sorjax._solvers.until_fresh_traced`).
+    ``lax.while_loop``, the polish :func:`sorjax.core._solvers.polish_traced` with each
+    solve re-run while stale (:func:`sorjax.core._solvers.until_fresh_traced`).
 
     Args:
         problem: the :class:`BundleProblem` (:func:`make_problem`).
@@ -821,8 +821,8 @@ def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Opti
 def _runner(problem: BundleProblem, max_steps: int):
     """``run((y, hints), method) -> Solved``: :func:`solve` from ``y`` with the
     closest-point parameters ``hints`` (:func:`foot_parameters` at ``y``), repeated
-    from its end while stale (:func:`sorjax._solvers.until_fresh_traced`); what
-    :func:`sorjax._solvers.polish_traced` polishes with.  The :class:`Solved`'s ``y``
+    from its end while stale (:func:`sorjax.core._solvers.until_fresh_traced`); what
+    :func:`sorjax.core._solvers.polish_traced` polishes with.  The :class:`Solved`'s ``y``
     is the pair ``(y, feet)`` at the end: every solve starts from the closest points
     the previous one ended with (no search of its own)."""
 
@@ -918,7 +918,7 @@ class BundleOut(eqx.Module):
             worse (:func:`orthographic_cost`).
         n: the number of samples counted (the sum of the weights).
         noise_ell: (V,) each view's outline noise correlation length along the curve
-            (px), as the covariance's noise model took it (:mod:`sorjax._noise`: one
+            (px), as the covariance's noise model took it (:mod:`sorjax.core._noise`: one
             matched to the residuals, or the view's floor's, :attr:`BundleProblem.noise_ell`).
     """
 
@@ -1004,7 +1004,7 @@ def _solved(y, problem: BundleProblem, T, used, steps, ok, options: Options, giv
     ``given``: ``((cov, s2, ell), r)``, :func:`covariance`'s ``(cov, s2, ell)`` and the
     whole-outline :func:`residuals` at ``y`` as the solver computed them (on
     ``stop_gradient`` inputs: :func:`_fit_bundle`), or None (computed here).  Given, they
-    are made differentiable by :func:`sorjax._solvers.computed_as` instead of traced a
+    are made differentiable by :func:`sorjax.core._solvers.computed_as` instead of traced a
     second time: the same values, half the compilation."""
     y = (pin_params(y[0], problem), y[1])
     y = implicit_solution(y, problem)
@@ -1079,7 +1079,7 @@ def fit_distorted(problem: BundleProblem, y_seeds, seed_ok, options: Options = O
     seed screened by ``options.distortion_screen_steps`` loose Levenberg-Marquardt steps
     (``lax.map``), then polished from its screened end in the order of the screened
     costs (Gauss-Newton, Levenberg-Marquardt as the fallback,
-    :func:`sorjax._solvers.polish_traced`, each solve repeated while stale, accepted at
+    :func:`sorjax.core._solvers.polish_traced`, each solve repeated while stale, accepted at
     its step limit when as good as stationary, as :func:`fit_bundle`) until one
     converges (``lax.while_loop``).  Ranking by the cost at the seeds themselves is not
     enough: a wrong basin (f -> infinity, where k1 has no effect) is as good as
@@ -1236,7 +1236,7 @@ def distortion_gate(delta_px2, n, s_px, options: Options = Options(), z_min: flo
     gate's (Options.perspective_z, perspective_factor)."""
     import dataclasses
 
-    from .core._assess import perspective_gate
+    from ._assess import perspective_gate
 
     opts = dataclasses.replace(options, perspective_z=z_min, perspective_factor=factor)
     return perspective_gate(delta_px2, n, s_px, opts)

@@ -2,7 +2,7 @@
 
 All functions are pure ``jax.numpy`` on stacked per-view homologies ``v`` (V, 3) and
 ``l`` (V, 3), in *normalised* coordinates (an isotropic similarity of the pixels, see
-:mod:`sorjax._camera`), so they ``jit`` and ``vmap`` over trials.  Each returns the
+:mod:`sorjax.core._camera`), so they ``jit`` and ``vmap`` over trials.  Each returns the
 intrinsics ``(fu, fv, u0, v0)`` in those coordinates and a validity flag.
 
 Method II (eqs. 27-28).  The pole-polar constraint ``omega v ~ l`` says that

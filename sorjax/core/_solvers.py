@@ -29,7 +29,7 @@ import optimistix as optx
 
 NULL_RCOND = 1e-6
 # The solvers search each closest point of the distance fields only near where it was at
-# the start (sorjax._field.closest_parameter_near); a solve whose residuals differ from
+# the start (sorjax.core._field.closest_parameter_near); a solve whose residuals differ from
 # whole-outline ones by more than STALE_TOL (normalised units, ~1e-7 px: another closest
 # point, not round-off) is "stale" and is run again from its end, RESOLVES times at most.
 STALE_TOL = 1e-9
