@@ -152,11 +152,17 @@ def _pickle(obj) -> bytes:
 def _source_hash() -> str:
     """A hash of sorjax's own source files and the versions of what compiles them: a
     stored program is reused only by the code that made it."""
-    import jax
-    import jaxlib
+    import importlib.metadata
 
-    h = hashlib.sha256(f"{jax.__version__} {jaxlib.__version__} {jax.default_backend()} "
-                       f"{jax.config.jax_enable_x64}".encode())
+    import jax
+
+    versions = []
+    for dist in ("jax", "jaxlib", "equinox", "optimistix", "lineax", "jaxtyping", "numpy"):
+        try:
+            versions.append(f"{dist}={importlib.metadata.version(dist)}")
+        except importlib.metadata.PackageNotFoundError:  # pragma: no cover
+            versions.append(f"{dist}=?")
+    h = hashlib.sha256(f"{' '.join(versions)} {jax.default_backend()} {jax.config.jax_enable_x64}".encode())
     root = os.path.dirname(os.path.abspath(__file__))
     for dirpath, dirnames, filenames in sorted(os.walk(root)):
         dirnames.sort()
@@ -197,7 +203,7 @@ class one_off_jit:
         self.__wrapped__ = fn
         self._static = tuple(static_argnames)
         self._kwargs = dict(jit_kwargs, static_argnames=self._static)
-        self._jitted = None
+        self._jitted = self._plain = None
         self._signature = inspect.signature(fn)
         self._programs: dict[str, tuple[Callable, Any]] = {}
 
@@ -217,7 +223,12 @@ class one_off_jit:
 
         ensure_cache()
         leaves = jax.tree_util.tree_leaves((args, kwargs))
-        if not exports_enabled() or any(isinstance(x, jax.core.Tracer) for x in leaves):
+        if any(isinstance(x, jax.core.Tracer) for x in leaves):
+            # inside another transformation: compile options belong to the outermost jit
+            if self._plain is None:
+                self._plain = jax.jit(self.__wrapped__, **self._kwargs)
+            return self._plain(*args, **kwargs)
+        if not exports_enabled():
             return self.jitted()(*args, **kwargs)
         try:
             run = self._program(args, kwargs)

@@ -192,12 +192,12 @@ def _residuals(p, args):
 
 def refine(field: DistanceField, samples, weights, p0, v0, E, max_steps: int, method: str, hints=None):
     """Minimise eq. 20 from ``(p0, v0, E)`` with ``method`` ("lm", "gn", "screen"),
-    the closest points searched near ``hints`` (N,) (:func:`sorjax._homology.symmetry_feet`
+    the closest points searched near ``hints`` (N,) (:func:`sorjax.core._symmetry.symmetry_feet`
     at ``p0``; None: searched here).  Returns ``(v, l, cost, converged, steps, p, r,
     stale, feet)``: ``r`` the whole-outline residuals, ``stale`` whether they differ
     from the solver's hinted ones (always ``False`` for "screen", whose runs are not
     repeated), ``feet`` their closest-point parameters (the hints of a solve from ``p``):
-    one pass, :func:`sorjax._homology.symmetry_checked`."""
+    one pass, :func:`sorjax.core._symmetry.symmetry_checked`."""
     args = (field, samples, weights, v0, E)
     if hints is None:
         hints = symmetry_feet(*_unpack(p0, v0, E), samples, field)
