@@ -199,13 +199,13 @@ class one_off_jit:
     jitted function.  ``lower`` and ``__wrapped__`` as ``jax.jit``'s."""
 
     def __init__(self, fn: Callable, static_argnames: tuple[str, ...] = (), **jit_kwargs):
-        functools.update_wrapper(self, fn)
-        self.__wrapped__ = fn
+        functools.update_wrapper(self, fn)  # also sets __wrapped__
         self._static = tuple(static_argnames)
         self._kwargs = dict(jit_kwargs, static_argnames=self._static)
         self._jitted = self._plain = None
         self._signature = inspect.signature(fn)
         self._programs: dict[str, tuple[Callable, Any]] = {}
+        self._cannot_store = False  # an export failed here once: trace as jax.jit from then on
 
     def jitted(self):
         if self._jitted is None:
@@ -228,11 +228,12 @@ class one_off_jit:
             if self._plain is None:
                 self._plain = jax.jit(self.__wrapped__, **self._kwargs)
             return self._plain(*args, **kwargs)
-        if not exports_enabled():
+        if self._cannot_store or not exports_enabled():
             return self.jitted()(*args, **kwargs)
         try:
             run = self._program(args, kwargs)
-        except Exception:  # export or deserialisation failed: trace as jax.jit does
+        except Exception:  # export or deserialisation failed: trace as jax.jit does, and not twice again
+            self._cannot_store = True
             return self.jitted()(*args, **kwargs)
         return run()
 

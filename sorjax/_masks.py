@@ -1,13 +1,7 @@
 """Sub-pixel outlines of objects from masks (binary or soft), in pixels.
 
-Pixel convention (OpenCV)
--------------------------
-The centre of pixel ``(row i, column j)`` is the image point ``x = j, y = i``; pixel
-``(i, j)`` covers the square ``[j - 0.5, j + 0.5] x [i - 0.5, i + 0.5]``.  The centre of
-the top-left pixel is therefore ``(0, 0)`` and the image of width ``W`` and height ``H``
-spans ``[-0.5, W - 0.5] x [-0.5, H - 0.5]``.  ``x`` grows to the right, ``y`` downwards.
-
-The method, the outlines' convention and the memory bounds are those described in
+Pixels follow OpenCV's convention (the centre of the top-left pixel is ``(0, 0)``); the
+convention in full, the method, the outlines' orientation and the memory bounds are those described in
 :mod:`sorjax._extract` (photographs are segmented there, then traced here).
 """
 
