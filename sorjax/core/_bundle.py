@@ -61,7 +61,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array, Float
 
 from ._camera import intrinsics_matrix, omega_matrix, omega_vector_from_intrinsics
@@ -72,7 +71,8 @@ from ._symmetry import homology_matrix, symmetry_checked, symmetry_feet, symmetr
 from ._linear import focal_from_principal_point, linear_estimates
 from ._noise import (NoiseGeometry, estimate_noise, jacobian_and_normal_sensitivity, knot_spacing_px, noise_geometry,
                      noise_meat, sample_normals, smoothed_outline, unit_blocks)
-from ._solvers import NULL_RCOND, Solved, computed_as, is_stale, polish_traced, solvers, until_fresh_traced
+from ._solvers import (NULL_RCOND, Method, Solved, computed_as, is_stale, least_squares, polish_traced, solvers,
+                       until_fresh_traced)
 from ._options import Options
 
 
@@ -361,11 +361,11 @@ def _hinted_residuals(y, args):
 _SOLVERS = solvers(rtol=1e-7, atol=1e-9)
 
 
-@functools.partial(jax.jit, static_argnames=("max_steps", "method"))
-def solve(y0, problem: BundleProblem, max_steps: int = 200, method: str = "lm", hints=None):
+def solve(y0, problem: BundleProblem, max_steps=200, method: str | Method = "lm", hints=None):
     """Minimise the bundle's cost from ``y0`` with ``method``: "lm" (Levenberg-Marquardt),
-    "gn" (Gauss-Newton) or "screen" (loose Levenberg-Marquardt, for a few steps);
-    returns ``(y, result, steps, residuals, stale, feet)``.
+    "gn" (Gauss-Newton) or "screen" (loose Levenberg-Marquardt, for a few steps), or a
+    :class:`sorjax.core._solvers.Method` (data; ``max_steps`` may be traced too);
+    returns ``(y, ok, steps, residuals, stale, feet)`` (``ok``: converged).
 
     The solver's residuals search each closest point only near where it was at ``y0``
     (:func:`foot_parameters`; :data:`sorjax.core._field.NEAR_WINDOW`): a third of the
@@ -382,10 +382,10 @@ def solve(y0, problem: BundleProblem, max_steps: int = 200, method: str = "lm", 
     closest-point parameters of the returned residuals (:func:`checked_residuals`)."""
     if hints is None:
         hints = foot_parameters(y0, problem)
-    sol = optx.least_squares(_hinted_residuals, _SOLVERS[method], y0, args=(problem, hints), max_steps=max_steps,
-                             throw=False)
-    r, feet, r_near = checked_residuals(sol.value, problem, hints)
-    return sol.value, sol.result, sol.stats["num_steps"], r, is_stale(r, r_near), feet
+    method = _SOLVERS[method] if isinstance(method, str) else method
+    y, ok, steps = least_squares(_hinted_residuals, y0, (problem, hints), method, max_steps, problem.weights.size)
+    r, feet, r_near = checked_residuals(y, problem, hints)
+    return y, ok, steps, r, is_stale(r, r_near), feet
 
 
 # The no-perspective reference: the focal length held at ORTHO_LOG_F (log of a focal
@@ -395,7 +395,7 @@ def solve(y0, problem: BundleProblem, max_steps: int = 200, method: str = "lm", 
 ORTHO_LOG_F = 9.2
 # only the cost is needed, to about 1e-4 (the evidence agreed to 5 digits with the
 # bundle's tolerances on the two-sphere scene; 2.7 ms instead of 4.1 ms a call)
-_ORTHO_SOLVER = optx.LevenbergMarquardt(rtol=1e-4, atol=1e-6)
+_ORTHO_SOLVER = Method(True, 1e-4, 1e-6)
 
 
 def orthographic_cost(y, problem: BundleProblem, max_steps: int = 100):
@@ -429,7 +429,8 @@ def _orthographic_fit(y, problem: BundleProblem, max_steps: int = 100):
         return cost, (z, feet), 0, stale
 
     z0 = (k0[0] - k0[1], jnp.asarray(a0))
-    cost, (z, _), _ = until_fresh_traced(once, (z0, foot_parameters(_orthographic_params(z0, k0, problem), problem)))
+    cost, (z, _), _ = until_fresh_traced(once, (z0, foot_parameters(_orthographic_params(z0, k0, problem), problem)),
+                                         jnp.zeros((), k0.dtype))
     return cost, z, k0
 
 
@@ -451,9 +452,9 @@ def _orthographic_solve(z0, hints, k0, problem: BundleProblem, max_steps: int = 
     def res(z, hints):
         return residuals(_orthographic_params(z, k0, problem), problem, hints)
 
-    sol = optx.least_squares(res, _ORTHO_SOLVER, z0, args=hints, max_steps=max_steps, throw=False)
-    r, feet, r_near = checked_residuals(_orthographic_params(sol.value, k0, problem), problem, hints)
-    return sol.value, jnp.sum(r**2), is_stale(r, r_near), feet
+    z, _, _ = least_squares(res, z0, hints, _ORTHO_SOLVER, max_steps, problem.weights.size)
+    r, feet, r_near = checked_residuals(_orthographic_params(z, k0, problem), problem, hints)
+    return z, jnp.sum(r**2), is_stale(r, r_near), feet
 
 
 @jax.jit
@@ -790,7 +791,7 @@ def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Opti
     S = ks.shape[0]
     # the seeds to try first, by cost (ties: the first given); the others last
     order = jnp.lexsort((jnp.arange(S), costs, ~seed_ok))
-    run = _runner(problem, max_steps)
+    run, r0 = _runner(problem, max_steps)
     n_res = problem.weights.size
 
     def cond(c):
@@ -800,7 +801,7 @@ def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Opti
     def body(c):
         i, _, have, best_bad, best_cost, best_y, best_r, best_cov, total = c
         j = order[i]
-        final, steps = polish_traced(run, ((ks[j], a0), feet0[j]), costs[j])
+        final, steps = polish_traced(run, ((ks[j], a0), feet0[j]), costs[j], _SOLVERS["gn"], _SOLVERS["lm"], r0)
         (y_end, feet), final = final.y, final._replace(y=final.y[0])
         cov, s2, step, ell = covariance(y_end, problem, T, feet, options)
         y, ok, cost = _converged(final, problem, step)
@@ -824,18 +825,20 @@ def _runner(problem: BundleProblem, max_steps: int):
     from its end while stale (:func:`sorjax.core._solvers.until_fresh_traced`); what
     :func:`sorjax.core._solvers.polish_traced` polishes with.  The :class:`Solved`'s ``y``
     is the pair ``(y, feet)`` at the end: every solve starts from the closest points
-    the previous one ended with (no search of its own)."""
+    the previous one ended with (no search of its own).  Returns ``(run, r0)``, ``r0``
+    zeros shaped as the residuals (the solve loops' first carry)."""
 
     def run(state, method):
         def once(state):
             y_end, res, n, r, stale, feet = solve(state[0], problem, max_steps=max_steps, method=method,
                                                   hints=state[1])
-            return (res == optx.RESULTS.successful, r), (y_end, feet), n, stale
+            return (res, r), (y_end, feet), n, stale
 
-        (ok, r), state, steps = until_fresh_traced(once, state)
+        (ok, r), state, steps = until_fresh_traced(once, state, (jnp.asarray(False), r0))
         return Solved(state, ok, jnp.sum(r**2), steps, r)
 
-    return run
+    r0 = jnp.zeros(problem.weights.size)
+    return run, r0
 
 
 def _converged(final: Solved, problem: BundleProblem, step=None):
@@ -1088,7 +1091,7 @@ def fit_distorted(problem: BundleProblem, y_seeds, seed_ok, options: Options = O
 
     Returns ``(y, ok, steps)``: ``y = (k (4 + n,), a (V, 2))`` the converged polish (else
     the one of lowest cost), steps of every screen and polish."""
-    run = _runner(problem, options.bundle_max_steps)
+    run, r0 = _runner(problem, options.bundle_max_steps)
     seed_ok = jnp.asarray(seed_ok, bool)
 
     def screened(y0):
@@ -1121,7 +1124,8 @@ def fit_distorted(problem: BundleProblem, y_seeds, seed_ok, options: Options = O
     def body(c):
         i, _, have, best_bad, best_cost, best_y, total = c
         j = order[i]
-        final, steps = polish_traced(run, jax.tree_util.tree_map(lambda x: x[j], starts), costs[j])
+        final, steps = polish_traced(run, jax.tree_util.tree_map(lambda x: x[j], starts), costs[j], _SOLVERS["gn"],
+                                     _SOLVERS["lm"], r0)
         y, ok, cost = _converged(final._replace(y=final.y[0]), problem)
         better = ~have | (best_bad & ok) | ((best_bad == ~ok) & (cost < best_cost))
         pick = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(better, a, b), new, old)  # noqa: E731

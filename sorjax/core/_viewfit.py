@@ -50,14 +50,13 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from ._field import DistanceField
 from ._symmetry import homology_matrix, symmetry_checked, symmetry_feet, symmetry_residuals, transfer
 from ._noise import (estimate_noise, jacobian_and_normal_sensitivity, knot_spacing_px, noise_geometry, noise_meat,
                       sample_normals, smoothed_outline, unit_blocks)
-from ._solvers import Solved, is_stale, polish_traced, solvers, until_fresh_traced
+from ._solvers import Method, Solved, is_stale, least_squares, polish_traced, solvers, until_fresh_traced
 from ._options import Options
 from ._prepare import Views
 
@@ -190,8 +189,9 @@ def _residuals(p, args):
     return jnp.concatenate([r, _barrier(v, l)])
 
 
-def refine(field: DistanceField, samples, weights, p0, v0, E, max_steps: int, method: str, hints=None):
-    """Minimise eq. 20 from ``(p0, v0, E)`` with ``method`` ("lm", "gn", "screen"),
+def refine(field: DistanceField, samples, weights, p0, v0, E, max_steps, method: str | Method, hints=None):
+    """Minimise eq. 20 from ``(p0, v0, E)`` with ``method`` ("lm", "gn", "screen" or a
+    :class:`sorjax.core._solvers.Method`; ``max_steps`` may be traced),
     the closest points searched near ``hints`` (N,) (:func:`sorjax.core._symmetry.symmetry_feet`
     at ``p0``; None: searched here).  Returns ``(v, l, cost, converged, steps, p, r,
     stale, feet)``: ``r`` the whole-outline residuals, ``stale`` whether they differ
@@ -201,15 +201,15 @@ def refine(field: DistanceField, samples, weights, p0, v0, E, max_steps: int, me
     args = (field, samples, weights, v0, E)
     if hints is None:
         hints = symmetry_feet(*_unpack(p0, v0, E), samples, field)
-    sol = optx.least_squares(_residuals, _SOLVERS[method], p0, args=args + (hints,), max_steps=max_steps,
-                             throw=False)
-    v, l = _unpack(sol.value, v0, E)
+    screen = isinstance(method, str) and method == "screen"
+    method = _SOLVERS[method] if isinstance(method, str) else method
+    p, ok, steps = least_squares(_residuals, p0, args + (hints,), method, max_steps, samples.shape[0] + 1)
+    v, l = _unpack(p, v0, E)
     # the screen's runs are not re-run: its staleness is not traced
-    r, feet, r_near = symmetry_checked(v, l, samples, field, weights, None if method == "screen" else hints)
-    stale = jnp.asarray(False) if method == "screen" else is_stale(r, r_near)
+    r, feet, r_near = symmetry_checked(v, l, samples, field, weights, None if screen else hints)
+    stale = jnp.asarray(False) if screen else is_stale(r, r_near)
     cost = jnp.sum(r**2) + jnp.sum(_barrier(v, l) ** 2)
-    ok = sol.result == optx.RESULTS.successful
-    return v, l, cost, ok, jnp.asarray(sol.stats["num_steps"], jnp.int32), sol.value, r, stale, feet
+    return v, l, cost, ok, steps, p, r, stale, feet
 
 
 class _Fit(eqx.Module):
@@ -280,16 +280,19 @@ def _polish(field, samples, weights, p0, v0, E, cost0, feet0, options: Options) 
     starts from the closest points its start's solve ended with (no search of its
     own).  The cost is ``nan`` where ``cost0`` is not finite (no start had a finite
     cost)."""
+    n = samples.shape[0]
+    z, zi, f = jnp.zeros((), p0.dtype), jnp.zeros((), jnp.int32), jnp.asarray(False)
+    out0 = (jnp.zeros(3), jnp.zeros(3), z, f, zi, jnp.zeros_like(p0), jnp.zeros(n), f, jnp.zeros(n))
 
     def run(state, method):
         def once(state):
             out = refine(field, samples, weights, state[0], v0, E, options.max_steps, method, state[1])
             return out, (out[5], out[8]), out[4], out[7]
 
-        out, state, steps = until_fresh_traced(once, state)
+        out, state, steps = until_fresh_traced(once, state, out0)
         return Solved(state, out[3], out[2], steps, out)
 
-    final, steps = polish_traced(run, (p0, feet0), cost0)
+    final, steps = polish_traced(run, (p0, feet0), cost0, _SOLVERS["gn"], _SOLVERS["lm"], out0)
     out = final.out
     cost = jnp.where(jnp.isfinite(cost0), out[2], jnp.nan)
     return _Fit(out[0], out[1], cost, out[3], steps, out[6], out[8])
