@@ -34,8 +34,8 @@ Initialisation is automatic (the paper picked bitangents by hand):
 * for a nearly conic outline (a bowl from above), the pole-polar pairs of its
   best-fitting conic, each an exact symmetry of the conic;
 
-every candidate is screened by a few Levenberg-Marquardt steps (optimistix) and the one
-with the lowest cost is polished.  The fit itself is the pure, jit / vmap-able
+every candidate is screened by a few Levenberg-Marquardt steps
+(:func:`sorjax.core._solvers.least_squares`) and the one with the lowest cost is polished.  The fit itself is the pure, jit / vmap-able
 :func:`sorjax.core._viewfit.fit_view` (a fixed-size set of starts, robust trimming as a
 fixed number of masked rounds); :func:`fit_homology` is its shell: validation, then one
 jitted call, then a :class:`Homology`.

@@ -34,13 +34,13 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import optimistix as optx
 from jaxtyping import Array, Float
 
 from .core._bundle import BundleProblem, axis_params, residuals, unpack_intrinsics
 from .core._camera import normalising_transform, omega_matrix, omega_vector_from_intrinsics, pixel_intrinsics
 from .core._field import DistanceField, curve_points, sample_weights, setup, signed_distance, signed_distances
 from .core._field import make_field as _make_field
+from .core._solvers import Method, least_squares
 from .core._symmetry import homology_matrix, symmetry_residuals, transfer
 
 __all__ = [
@@ -87,8 +87,8 @@ def bundle_residuals(
     return jax.vmap(symmetry_residuals)(v_x, l, samples, fields)
 
 
-_TIGHT = optx.LevenbergMarquardt(rtol=1e-11, atol=1e-13)
-_POLISH = optx.GaussNewton(rtol=1e-13, atol=1e-15)
+_TIGHT = Method(True, 1e-11, 1e-13)  # Levenberg-Marquardt
+_POLISH = Method(False, 1e-13, 1e-15)  # Gauss-Newton
 _POLISH_STEPS = 6
 
 
@@ -143,7 +143,7 @@ def calibrated_intrinsics(
         k = f(points, starts)                     # points (trials, V, M, 2) -> (trials, 4)
 
     Pure (jit / vmap / grad clean).  Differentiable in ``points`` by implicit
-    differentiation of the optimum (optimistix ``ImplicitAdjoint``); the coordinate
+    differentiation of the optimum (:func:`sorjax.core._solvers.implicit_minimum`); the coordinate
     normalisation (computed from ``points`` under ``stop_gradient``) and the start are
     constants.  The solve is Levenberg-Marquardt to a relative step of 1e-11 within
     ``max_steps``; it does not raise when it runs out of steps (start it at a
@@ -160,13 +160,11 @@ def calibrated_intrinsics(
     a = start.aspect_ratio
     y0 = jax.lax.stop_gradient(_start_chart(T, start, points.shape[0]))
     args = BundleProblem(fields, samples, weights, jnp.asarray(jnp.nan if a is None else a, jnp.float64))
-    sol = optx.least_squares(residuals, _TIGHT, y0, args=args, max_steps=max_steps, throw=False)
+    y, _, _ = least_squares(residuals, y0, args, _TIGHT, max_steps)
     # Levenberg-Marquardt may stop on a step its damping shrank (~1e-9 short of the
     # optimum); a few undamped Gauss-Newton steps settle it to rounding, which finite
     # differences of a single outline point (1e-4 px) need.  Gradients: implicit, at
-    # this optimum (the first solve's output is only a start).
-    sol = optx.least_squares(
-        residuals, _POLISH, jax.lax.stop_gradient(sol.value), args=args, max_steps=_POLISH_STEPS,
-        throw=False, adjoint=optx.ImplicitAdjoint(),
-    )
-    return pixel_intrinsics(T, *unpack_intrinsics(sol.value[0], args.aspect))
+    # this optimum (the first solve's output is only a start), by the core's one
+    # mechanism (:func:`sorjax.core._solvers.implicit_minimum`).
+    y, _, _ = least_squares(residuals, jax.lax.stop_gradient(y), args, _POLISH, _POLISH_STEPS)
+    return pixel_intrinsics(T, *unpack_intrinsics(y[0], args.aspect))

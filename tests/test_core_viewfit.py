@@ -141,9 +141,9 @@ def test_handle_is_trimmed(batch):
 
 
 def test_each_solver_is_traced_once(batch, monkeypatch):
-    """Two solve loops in the program: the screen and the polish (Gauss-Newton and its
-    Levenberg-Marquardt fallback are one loop with the method as data; the robust
-    refits reuse the polish's while loop), whatever the trimming rounds."""
+    """One solve in the program: the screen, the polish (Gauss-Newton, its
+    Levenberg-Marquardt fallback) and the robust refits are iterations of one while
+    loop with the method as data, whatever the trimming rounds."""
     from sorjax.core import _solvers
 
     rows, views, _, _ = batch
@@ -155,7 +155,7 @@ def test_each_solver_is_traced_once(batch, monkeypatch):
         monkeypatch.setattr(_solvers, "_minimise", lambda *a, **k: traced.append(1) or inner(*a, **k))
         fit = jax.jit(lambda f, s, w, p, sc: fit_view(f, s, w, p, options, None, sc))  # noqa: B023
         fit.lower(*args)
-        assert len(traced) == 2
+        assert len(traced) == 1
 
 
 def test_sphere_outline_is_conic(batch):

@@ -182,3 +182,23 @@ def test_polish_falls_back_to_levenberg_marquardt():
     y, _, n_lm = least_squares(_res, Y0, data, lm, 200)
     assert bool(final.ok) and int(steps) > int(final.steps) >= 1
     np.testing.assert_allclose(_flat(final.y), _flat(y), rtol=1e-8)
+
+
+def test_solves_in_the_calibration_program(monkeypatch):
+    """The whole calibration (:func:`sorjax.core.calibrate`: per-view fits, linear seeds,
+    bundle, covariance, model checks) traced by ``jax.make_jaxpr`` holds three solve
+    loops: the per-view fit (screen, polish and refits as one loop), the bundle (every
+    seed's Gauss-Newton round and Levenberg-Marquardt fallback as one loop) and the
+    bundle's no-perspective reference fit.  A further solver fails this test."""
+    import sorjax
+    from sorjax import core, scenes
+    from sorjax.core import _solvers
+
+    sc = scenes.two_spheres(f=700.0)
+    points = jnp.stack([sorjax.make_outline(o).points for o in sc.outlines])
+    traced = []
+    inner = _solvers._minimise
+    monkeypatch.setattr(_solvers, "_minimise", lambda *a, **k: traced.append(1) or inner(*a, **k))
+    jax.make_jaxpr(lambda p: core.calibrate(p))(points)
+    assert len(traced) == 3
+

@@ -30,7 +30,7 @@ case where the vertex chart ran into its 200-step limit.  The chart stays well
 conditioned when ``v_x`` is at infinity (``v_x`` then simply has ``v_3 = 0``) and
 never degenerates (``v^T l = l^T omega^-1 l > 0``).
 
-optimistix with Jacobians by autodiff: every seed (the linear methods' estimates with
+One least-squares loop (:func:`sorjax.core._solvers.least_squares`) with Jacobians by autodiff: every seed (the linear methods' estimates with
 the per-view fits' axes, or a safe spread of cameras when no linear omega is positive
 definite) is ranked by its cost, the best is polished by
 Gauss-Newton (Levenberg-Marquardt as the fallback; see :func:`fit_bundle`).

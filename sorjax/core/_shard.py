@@ -84,8 +84,8 @@ class TrialSharder:
         if batch not in ("vmap", "map"):
             raise ValueError(f"batch must be 'vmap' or 'map'; got {batch!r}")
         if batch == "map" and len(self.devices) > 1:
-            raise ValueError("batch='map' runs on one device (optimistix's solvers do not run inside "
-                             "jax.shard_map); use batch='vmap' to shard trials over several devices")
+            raise ValueError("batch='map' runs on one device; use batch='vmap' to shard trials over several "
+                             "devices")
         if threads is not None and (isinstance(threads, bool) or not isinstance(threads, (int, np.integer))
                                     or threads < 1):
             raise ValueError(f"threads must be a positive integer (parts run side by side on one CPU device); "

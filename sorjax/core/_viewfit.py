@@ -21,17 +21,16 @@ from a fixed-size set of automatic starts, all computed inside the program:
 
 ``N_STARTS`` (45) slots in all, an unused slot masked (cost infinite): the same starts
 as the host code this replaces.  Every valid start is screened by
-``options.screen_steps`` loose Levenberg-Marquardt steps (:func:`_screen`: the valid
-starts compacted to the front and screened ``SCREEN_BLOCK`` per vmapped solve, in a
-while loop that stops after the last valid one, so that the 36 conic slots cost
-nothing unless the outline is nearly conic), the lowest cost (the first of equal ones)
-is polished (Gauss-Newton, then Levenberg-Marquardt where that fails:
-:func:`sorjax.core._solvers.polish_traced`), then up to ``options.trim_rounds`` robust
-rounds trim outlier samples (a handle, a shadow) and refit from the previous optimum,
-until the first round with nothing to trim (never below half of the samples).  The
-polish and the refits are one while loop (its round 0 the polish of the screened
-start), so that each solver is traced once: the screen, Gauss-Newton and
-Levenberg-Marquardt, three solves in the program.
+``options.screen_steps`` loose Levenberg-Marquardt steps (the valid starts compacted
+to the front and screened one by one until the last valid one, so that the 36 conic
+slots cost nothing unless the outline is nearly conic), the lowest cost (the first of
+equal ones) is polished (Gauss-Newton, then Levenberg-Marquardt where that fails),
+then up to ``options.trim_rounds`` robust rounds trim outlier samples (a handle, a
+shadow) and refit from the previous optimum, until the first round with nothing to
+trim (never below half of the samples).  The screen, the polish and the refits are
+one while loop whose every iteration is one solve, its method, step budget, start and
+weights data (:func:`_fit_loop`): the program holds one solve of eq. 20
+(:func:`sorjax.core._solvers.least_squares`).
 
 Under ``vmap`` every while loop runs until its slowest lane is done (the others
 masked): a batch costs what its most demanding view needs, per loop.
@@ -56,7 +55,7 @@ from ._field import DistanceField
 from ._symmetry import homology_matrix, symmetry_checked, symmetry_feet, symmetry_residuals, transfer
 from ._noise import (estimate_noise, jacobian_and_normal_sensitivity, knot_spacing_px, noise_geometry, noise_meat,
                       sample_normals, smoothed_outline, unit_blocks)
-from ._solvers import Method, Solved, is_stale, least_squares, polish_traced, solvers, until_fresh_traced
+from ._solvers import Method, is_stale, least_squares, pick, solvers, until_fresh_traced
 from ._options import Options
 from ._prepare import Views
 
@@ -222,80 +221,125 @@ class _Fit(eqx.Module):
     feet: Array
 
 
-SCREEN_BLOCK = 4  # starts screened per block (one vmapped solve); blocks run while needed (a view has ~4 valid)
-
-
-def _screen(field, samples, weights, vs, ls, valid, options: Options):
-    """Screen the valid starts ``(vs, ls)`` (S, 3): ``options.screen_steps`` loose
-    Levenberg-Marquardt steps each.  The valid starts are moved to the front (stably:
-    their order is kept) and screened ``SCREEN_BLOCK`` at a time by a while loop that
-    stops after the last block holding a valid start: a view with few valid starts
-    (every view but a nearly conic one) pays for one block, and under ``vmap`` a batch
-    pays for the blocks its most demanding view needs.  Returns ``(costs, p, steps, v0,
-    E, feet)`` in the compacted order, ``inf`` cost where invalid or non-finite;
-    ``feet`` (S', N) the closest-point parameters at each screened end (the polish's
-    hints)."""
-    s = vs.shape[0]
-    block = min(SCREEN_BLOCK, s)
-    n_blocks = -(-s // block)
-    pad = n_blocks * block - s
+def _compact_starts(vs, ls, valid):
+    """The starts ``(vs, ls)`` (S, 3) with the valid ones moved to the front (stably:
+    their order is kept; an invalid slot holds a harmless copy of the first), packed
+    (:func:`_pack`): ``(p0 (S, 4), v0 (S, 3), E (S, 3, 2), n_valid)``."""
     order = jnp.argsort(~valid, stable=True)
     vs, ls, valid = vs[order], ls[order], valid[order]
-    vs = jnp.concatenate([vs, jnp.broadcast_to(vs[:1], (pad, 3))])
-    ls = jnp.concatenate([ls, jnp.broadcast_to(ls[:1], (pad, 3))])
-    valid = jnp.concatenate([valid, jnp.zeros(pad, bool)])
-    vs = jnp.where(valid[:, None], vs, vs[0])  # invalid slots: a harmless copy
+    vs = jnp.where(valid[:, None], vs, vs[0])
     ls = jnp.where(valid[:, None], ls, ls[0])
     p0, v0, E = jax.vmap(_pack)(vs, ls)
-    n_valid = jnp.sum(valid)
+    return p0, v0, E, jnp.sum(valid)
 
-    def screen(p, v, e):
-        out = refine(field, samples, weights, p, v, e, options.screen_steps, "screen")
-        return out[2], out[5], out[4], out[8]
+
+def _fit_loop(field, samples, weights, p0s, v0s, Es, n_valid, scale, options: Options):
+    """The screen, the polish and the robust refits as one ``lax.while_loop`` whose
+    every iteration is one solve (:func:`refine`, re-run while stale,
+    :func:`sorjax.core._solvers.until_fresh_traced`), the method, step budget, start and
+    weights chosen as data, so that the program holds one solve of eq. 20:
+
+    * iterations ``0 .. n_valid - 1`` screen the compacted starts ``(p0s, v0s, Es)``,
+      one each (``options.screen_steps`` loose Levenberg-Marquardt steps, closest
+      points searched over the whole outline); the lowest cost (the first of equal
+      ones) is polished;
+    * a round of the polish: Gauss-Newton from its start, then, only where that did not
+      converge or ended above the start's cost, Levenberg-Marquardt from the better of
+      its end and the start (:func:`sorjax.core._solvers.polish_traced`'s rule); every
+      solve starts from the closest points the previous one ended with;
+    * after round 0 (every sample) and while there is something to trim (never below
+      half of the samples), at most ``options.trim_rounds`` rounds refit from the
+      previous optimum with the outliers (:func:`_outliers`) given zero weight.
+
+    Returns ``(fit, keep, steps, cost_all)``: the last round's :class:`_Fit` (its cost
+    NaN where no start had a finite cost), the samples it kept, every step of the
+    chosen start's screen and of the polish, and round 0's cost."""
+    n = samples.shape[0]
+    z, zi, f = jnp.zeros((), p0s.dtype), jnp.zeros((), jnp.int32), jnp.asarray(False)
+    out0 = (jnp.zeros(3), jnp.zeros(3), z, f, zi, jnp.zeros(4), jnp.zeros(n), f, jnp.zeros(n))
+    screen, gn, lm = (_SOLVERS[k] for k in ("screen", "gn", "lm"))
+    active = weights > 0
+    keep = jnp.ones(n, bool)
+    fit0 = _Fit(jnp.zeros(3), jnp.zeros(3), z, f, zi, jnp.zeros(n), jnp.zeros(n))
 
     def cond(c):
-        return c[0] * block < n_valid
+        return ~c["done"]
 
     def body(c):
-        b, costs, ps, steps, feet = c
-        i = b * block
-        sl = lambda a: jax.lax.dynamic_slice_in_dim(a, i, block)  # noqa: E731
-        cb, pb, nb, fb = jax.vmap(screen)(sl(p0), sl(v0), sl(E))
-        up = lambda a, u: jax.lax.dynamic_update_slice_in_dim(a, u, i, 0)  # noqa: E731
-        return b + 1, up(costs, cb), up(ps, pb), up(steps, nb), up(feet, fb)
+        screening = c["i"] < n_valid
+        s = jnp.minimum(c["i"], p0s.shape[0] - 1)
+        lm_round = c["attempt"] == 1
+        p_in = jnp.where(screening, p0s[s], c["p"])
+        v_in = jnp.where(screening, v0s[s], c["v0"])
+        E_in = jnp.where(screening, Es[s], c["E"])
+        # a screened start's closest points: searched over the whole outline
+        hints = jax.lax.cond(screening, lambda: symmetry_feet(*_unpack(p_in, v_in, E_in), samples, field),
+                             lambda: c["feet"])
+        method = pick(screening, screen, pick(lm_round, lm, gn))
+        budget = jnp.where(screening, options.screen_steps, options.max_steps)
+        w = jnp.where(screening, weights, weights * c["kept"])
 
-    n = n_blocks * block
-    init = (jnp.asarray(0, jnp.int32), jnp.full(n, jnp.inf), p0, jnp.zeros(n, jnp.int32),
-            jnp.zeros((n, samples.shape[0])))
-    _, costs, ps, steps0, feet = jax.lax.while_loop(cond, body, init)
-    costs = jnp.where(valid & jnp.isfinite(costs), costs, jnp.inf)
-    return costs, ps, steps0, v0, E, feet
-
-
-def _polish(field, samples, weights, p0, v0, E, cost0, feet0, options: Options) -> _Fit:
-    """Polish one start ``p0`` (chart ``v0, E``; its cost ``cost0``, its closest-point
-    parameters ``feet0``) with ``weights``: Gauss-Newton, then Levenberg-Marquardt
-    where that fails (:func:`sorjax.core._solvers.polish_traced`), each solve re-run while
-    its hints are stale (:func:`sorjax.core._solvers.until_fresh_traced`); every solve
-    starts from the closest points its start's solve ended with (no search of its
-    own).  The cost is ``nan`` where ``cost0`` is not finite (no start had a finite
-    cost)."""
-    n = samples.shape[0]
-    z, zi, f = jnp.zeros((), p0.dtype), jnp.zeros((), jnp.int32), jnp.asarray(False)
-    out0 = (jnp.zeros(3), jnp.zeros(3), z, f, zi, jnp.zeros_like(p0), jnp.zeros(n), f, jnp.zeros(n))
-
-    def run(state, method):
         def once(state):
-            out = refine(field, samples, weights, state[0], v0, E, options.max_steps, method, state[1])
-            return out, (out[5], out[8]), out[4], out[7]
+            out = refine(field, samples, w, state[0], v_in, E_in, budget, method, state[1])
+            return out, (out[5], out[8]), out[4], out[7] & ~screening  # (a screen is not re-run)
 
-        out, state, steps = until_fresh_traced(once, state, out0)
-        return Solved(state, out[3], out[2], steps, out)
+        out, (p_end, feet_end), steps = until_fresh_traced(once, (p_in, hints), out0)
+        cost, ok = out[2], out[3]
 
-    final, steps = polish_traced(run, (p0, feet0), cost0, _SOLVERS["gn"], _SOLVERS["lm"], out0)
-    out = final.out
-    cost = jnp.where(jnp.isfinite(cost0), out[2], jnp.nan)
-    return _Fit(out[0], out[1], cost, out[3], steps, out[6], out[8])
+        # -- a screened start: the best so far (the first of equal costs)
+        cost_s = jnp.where(jnp.isfinite(cost), cost, jnp.inf)
+        better = screening & ((c["i"] == 0) | (cost_s < c["best_cost"]))
+        best = pick(better, (cost_s, p_end, v_in, E_in, feet_end, steps),
+                    (c["best_cost"], c["best_p"], c["best_v0"], c["best_E"], c["best_feet"], c["best_steps"]))
+        last_screen = screening & (c["i"] + 1 >= n_valid)
+
+        # -- a polish solve (Gauss-Newton, or its Levenberg-Marquardt fallback)
+        polishing = ~screening
+        improved = jnp.isfinite(cost) & (cost <= c["cost0"] * (1 + 1e-12))
+        fallback = polishing & ~lm_round & ~(ok & improved)
+        round_done = polishing & ~fallback
+        fit = _Fit(out[0], out[1], jnp.where(jnp.isfinite(c["cost0"]), cost, jnp.nan), ok,
+                   c["round_steps"] + steps, out[6], out[8])
+        trim = _outliers(fit.r * scale, active, c["kept"], options)
+        trimmed = c["kept"] & ~trim
+        go = jnp.any(trim) & (jnp.sum(trimmed & active) >= jnp.sum(active) // 2)
+        rounds = c["round"] + round_done
+        more = go & (rounds <= options.trim_rounds)
+        # the next round's start: this optimum, its chart centred on it, its cost with the
+        # trimmed weights (from this fit's residuals: kept and trimmed are 0 / 1)
+        p_next, v_next, E_next = _pack(fit.v, fit.l)
+        barrier = _BARRIER_GAIN * jax.nn.relu(_BARRIER_AT - jnp.abs(fit.v @ fit.l) / jnp.linalg.norm(fit.l))
+        cost_next = jnp.sum((fit.r * trimmed) ** 2) + barrier**2
+
+        # the start of the next solve: the polish of the best screened start, the
+        # fallback from the better of the Gauss-Newton end and its start, or the next round
+        start_p = jnp.where(last_screen, best[1], jnp.where(fallback & improved, p_end,
+                                                            jnp.where(round_done, p_next, c["p"])))
+        start_feet = jnp.where(last_screen, best[4], jnp.where(fallback & improved, feet_end,
+                                                               jnp.where(round_done, fit.feet, c["feet"])))
+        return dict(
+            i=c["i"] + 1, done=round_done & ~more,
+            best_cost=best[0], best_p=best[1], best_v0=best[2], best_E=best[3], best_feet=best[4],
+            best_steps=best[5],
+            p=start_p, feet=start_feet,
+            v0=jnp.where(last_screen, best[2], jnp.where(round_done, v_next, c["v0"])),
+            E=jnp.where(last_screen, best[3], jnp.where(round_done, E_next, c["E"])),
+            cost0=jnp.where(last_screen, best[0], jnp.where(round_done, cost_next, c["cost0"])),
+            attempt=jnp.where(fallback, 1, 0).astype(jnp.int32),
+            round_steps=jnp.where(fallback, c["round_steps"] + steps, 0).astype(jnp.int32),
+            round=rounds, kept=jnp.where(round_done, trimmed, c["kept"]),
+            fit=pick(round_done, fit, c["fit"]), keep=jnp.where(round_done, c["kept"], c["keep"]),
+            steps=c["steps"] + jnp.where(round_done, fit.steps, 0),
+            cost_all=jnp.where(round_done & (c["round"] == 0), fit.cost, c["cost_all"]),
+        )
+
+    inf = jnp.asarray(jnp.inf, p0s.dtype)
+    init = dict(
+        i=zi, done=f, best_cost=inf, best_p=p0s[0], best_v0=v0s[0], best_E=Es[0], best_feet=jnp.zeros(n),
+        best_steps=zi, p=p0s[0], feet=jnp.zeros(n), v0=v0s[0], E=Es[0], cost0=inf, attempt=zi, round_steps=zi,
+        round=zi, kept=keep, fit=fit0, keep=keep, steps=zi, cost_all=z)
+    c = jax.lax.while_loop(cond, body, init)
+    return c["fit"], c["keep"], c["best_steps"] + c["steps"], c["cost_all"]
 
 
 # ------------------------------------------------------------- starting points
@@ -505,42 +549,9 @@ def fit_view(field: DistanceField, samples: Float[Array, "N 2"], weights: Float[
     else:
         vs, ls = (jnp.asarray(a, jnp.float64)[None] for a in init)
         valid = jnp.ones(1, bool)
-    costs, ps, steps0, v0, E, feet = _screen(field, samples, weights, vs, ls, valid, options)
-    k = jnp.argmin(costs)  # the first of equal costs
+    p0s, v0s, Es, n_valid = _compact_starts(vs, ls, valid)
+    fit, keep, steps, cost_all = _fit_loop(field, samples, weights, p0s, v0s, Es, n_valid, scale, options)
     n_all = jnp.sum(weights)
-    active = weights > 0
-    n = samples.shape[0]
-
-    # One while loop polishes the screened start with every sample (round 0), then
-    # refits from the previous round's optimum with the outliers trimmed, while there
-    # is something to trim (never below half of the samples), ``options.trim_rounds``
-    # refits at most: the polish (Gauss-Newton, Levenberg-Marquardt) is traced once.
-    # A while loop, not a select: under vmap a batch with nothing to trim refits nothing.
-    def cond(c):
-        i, go = c[0], c[5]
-        return (i == 0) | (go & (i <= options.trim_rounds))
-
-    def body(c):
-        i, start, _, _, kept, _, steps, cost_all = c
-        fit = _polish(field, samples, weights * kept, *start, options)
-        out = _outliers(fit.r * scale, active, kept, options)
-        trimmed = kept & ~out
-        go = jnp.any(out) & (jnp.sum(trimmed & active) >= jnp.sum(active) // 2)
-        # the next round's start: this optimum, its chart centred on it, its cost with
-        # the trimmed weights (from this fit's residuals: kept and trimmed are 0 / 1)
-        p, v, e = _pack(fit.v, fit.l)
-        barrier = _BARRIER_GAIN * jax.nn.relu(_BARRIER_AT - jnp.abs(fit.v @ fit.l) / jnp.linalg.norm(fit.l))
-        cost = jnp.sum((fit.r * trimmed) ** 2) + barrier**2
-        cost_all = jnp.where(i == 0, fit.cost, cost_all)
-        return i + 1, (p, v, e, cost, fit.feet), fit, kept, trimmed, go, steps + fit.steps, cost_all
-
-    zero = jnp.zeros((), jnp.float64)
-    fit0 = _Fit(jnp.zeros(3), jnp.zeros(3), zero, jnp.asarray(False), jnp.asarray(0, jnp.int32), jnp.zeros(n),
-                jnp.zeros(n))
-    keep = jnp.ones(n, bool)
-    init_c = (jnp.asarray(0, jnp.int32), (ps[k], v0[k], E[k], costs[k], feet[k]), fit0, keep, keep,
-              jnp.asarray(True), steps0[k], zero)
-    _, _, fit, keep, _, _, steps, cost_all = jax.lax.while_loop(cond, body, init_c)
     w = weights * keep
     z, ell = _infinity_z(field, samples, w, fit.v, fit.l, fit.feet, scale, options)
     l = fit.l / jnp.linalg.norm(fit.l[:2])
