@@ -202,3 +202,34 @@ def test_solves_in_the_calibration_program(monkeypatch):
     jax.make_jaxpr(lambda p: core.calibrate(p))(points)
     assert len(traced) == 3
 
+
+
+def test_traced_once_replays_without_tracing_again():
+    """:func:`sorjax.core._solvers.traced_once`: the shapes of the result from one trace,
+    and a replay equal to the function (eagerly, under jit, vmap and grad, closing over
+    traced values) with no second trace."""
+    from sorjax.core._solvers import traced_once
+
+    calls = []
+
+    def f(x, y):
+        calls.append(1)
+        return {"s": jnp.sin(x) * y, "n": jnp.sum(x**2)}
+
+    x = jnp.linspace(0.1, 1.0, 5)
+
+    def outer(y):
+        replay, shapes = traced_once(lambda x: f(x, y), x)
+        assert shapes["s"].shape == (5,) and shapes["n"].shape == ()
+        return jax.lax.map(lambda xi: replay(xi)["n"], jnp.stack([x, 2 * x]))
+
+    got = jax.jit(outer)(3.0)
+    assert len(calls) == 1
+    np.testing.assert_allclose(got, [float(jnp.sum(x**2)), float(jnp.sum(4 * x**2))], rtol=1e-14)
+    np.testing.assert_allclose(jax.vmap(outer)(jnp.array([1.0, 2.0]))[:, 1], float(jnp.sum(4 * x**2)), rtol=1e-14)
+
+    def g(y):
+        replay, _ = traced_once(lambda x: f(x, y), x)
+        return jnp.sum(replay(x)["s"])
+
+    np.testing.assert_allclose(jax.grad(g)(2.0), float(jnp.sum(jnp.sin(x))), rtol=1e-14)

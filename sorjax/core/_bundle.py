@@ -72,7 +72,7 @@ from ._linear import focal_from_principal_point, linear_estimates
 from ._noise import (NoiseGeometry, estimate_noise, jacobian_and_normal_sensitivity, knot_spacing_px, noise_geometry,
                      noise_meat, sample_normals, smoothed_outline, unit_blocks)
 from ._solvers import (NULL_RCOND, Method, Solved, computed_as, is_stale, least_squares, polish_traced, solvers,
-                       until_fresh_traced)
+                       traced_once, until_fresh_traced)
 from ._options import Options
 
 
@@ -1105,7 +1105,7 @@ def fit_distorted(problem: BundleProblem, y_seeds, seed_ok, options: Options = O
         return (y, feet), jnp.where(jnp.isfinite(cost), cost, jnp.inf), jnp.asarray(n, jnp.int32)
 
     first = jax.tree_util.tree_map(lambda x: x[0], y_seeds)
-    shapes = jax.eval_shape(screened, first)
+    screened, shapes = traced_once(screened, first)
 
     def screen(args):
         y0, good = args

@@ -34,6 +34,7 @@ from ._checks import (CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, CULPRIT_VIEWS
 from ._options import Options
 from ._prepare import joint_transform, prepare_views
 from ._result import RESULTS, CoreResult
+from ._solvers import traced_once
 from ._viewfit import ViewHomologies, fit_views, homologies_in_pixels, with_noise_floor
 
 METHODS = ("bundle", "I", "IIa", "IIb")
@@ -194,8 +195,7 @@ def _bundles(c: _Common, homs: ViewHomologies, aspects, options: Options, fixed=
     need = jnp.any(jnp.isfinite(aspects)) & ~jnp.any(jnp.isnan(aspects))
     run_aspects = jnp.concatenate([aspects, jnp.full(1, jnp.nan)])
     run = jnp.concatenate([jnp.ones(k, bool), need[None]])
-    solve = lambda a: _bundle(c, homs, a, options, fixed)  # noqa: E731
-    shape = jax.eval_shape(solve, aspects[0])
+    solve, shape = traced_once(lambda a: _bundle(c, homs, a, options, fixed), aspects[0])
     skip = lambda a: jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shape)  # noqa: E731
     outs = jax.lax.map(lambda ar: jax.lax.cond(ar[1], solve, skip, ar[0]), (run_aspects, run))
     i_free = jnp.where(jnp.any(jnp.isnan(aspects)), jnp.argmax(jnp.isnan(aspects)), k)

@@ -24,6 +24,7 @@ from typing import Any, Callable, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+import jax.extend
 from jax.flatten_util import ravel_pytree
 
 NULL_RCOND = 1e-6
@@ -206,6 +207,24 @@ def is_stale(r_whole, r_near):
 
 def _zeros(shapes):
     return jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+
+
+def traced_once(fn: Callable[..., Any], *args) -> tuple[Callable[..., Any], Any]:
+    """``fn`` traced once at ``args``: ``(replay, out_shapes)``, ``replay(*args)`` giving
+    ``fn(*args)`` (for arguments of the same shapes) by evaluating the traced program
+    rather than tracing ``fn`` again, and ``out_shapes`` the pytree of
+    :class:`jax.ShapeDtypeStruct` of its result.  For control flow that needs the
+    shapes of a branch's result before the branch (a skipped branch's zeros, a loop's
+    first carry): :func:`jax.eval_shape` would trace ``fn`` a second time, which for a
+    whole bundle is seconds."""
+    closed, out_shapes = jax.make_jaxpr(fn, return_shape=True)(*args)
+    out_tree = jax.tree_util.tree_structure(out_shapes)
+    run = jax.extend.core.jaxpr_as_fun(closed)
+
+    def replay(*a):
+        return jax.tree_util.tree_unflatten(out_tree, run(*jax.tree_util.tree_leaves(a)))
+
+    return replay, out_shapes
 
 
 def until_fresh_traced(solve_once: Callable[[Any], tuple], y0, out0=None) -> tuple[Any, Any, Any]:
