@@ -61,7 +61,6 @@ def test_axis_chart_gives_the_pole_polar_pairs(scene):
     np.testing.assert_allclose(np.cross(m, l2), 0.0, atol=1e-12 * np.abs(m).max())
 
 
-@pytest.mark.slow
 def test_solve_vmapped_over_trials_matches_loop(scene):
     trials = []
     for t in range(2):
@@ -245,7 +244,6 @@ def test_predicted_error_properties(scene):
     np.testing.assert_allclose(s1[0], s1[1], rtol=1e-12)  # unit aspect: fu = fv
 
 
-@pytest.mark.slow
 def test_losses_import_and_differentiate_in_fresh_session():
     code = textwrap.dedent(
         """

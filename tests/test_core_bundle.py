@@ -183,7 +183,6 @@ def single_outs(noisy_trials):
     return [bundle_estimate(*args, OPTIONS) for args in noisy_trials]
 
 
-@pytest.mark.slow
 def test_bundle_jit_vmap_equals_single_calls(noisy_trials, single_outs):
     stacked = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *noisy_trials)
     batched = jax.jit(jax.vmap(bundle_estimate, in_axes=(0,) * 8 + (None,)))(*stacked, OPTIONS)
@@ -220,7 +219,6 @@ def test_fit_bundle_reaches_a_stationary_point_near_the_truth(scene, noisy_trial
         assert np.all(np.abs(K[:2, 2] - np.asarray(scene.K)[:2, 2]) < 0.05 * F)
 
 
-@pytest.mark.slow
 def test_bundle_estimate_differentiates_through_the_solve(noisy_trials, single_outs):
     """jax.grad of the bundle's focal length with respect to the outline points (the
     optimum differentiated implicitly; the solvers' loops stay out of the gradient)

@@ -2,7 +2,7 @@
 jit/vmap consistency, robust trimming, conic and at-infinity flags.
 
 All views go through one compiled ``jax.lax.map`` (one batch of equal shapes); the
-``jax.vmap`` of the same fit is compared with it in the slow tests."""
+``jax.vmap`` of the same fit is compared with it."""
 
 
 import jax
@@ -29,7 +29,7 @@ def _points(outlines):
 @jax.jit
 def _fit_all(points):
     views = prepare_views(points, OPTIONS.n_samples)
-    fits = fit_views(views, OPTIONS, sequential=True)  # lax.map: the vmap is compared in the slow tests
+    fits = fit_views(views, OPTIONS, sequential=True)  # lax.map: the vmap is compared below
     return views, fits, homologies_in_pixels(views, fits, OPTIONS)
 
 
@@ -107,7 +107,6 @@ def test_noisy_views_are_local_minima_near_truth(batch):
         assert dl < 0.5, (name, dl)
 
 
-@pytest.mark.slow
 def test_jit_vmap_equals_single_calls(batch):
     rows, views, fits, _ = batch
     one = jax.jit(lambda f, s, w, p, sc: fit_view(f, s, w, p, OPTIONS, None, sc))
@@ -218,7 +217,6 @@ def test_init_replaces_the_automatic_starts(batch):
     assert float(jnp.abs(g.l @ f.l)) > 1 - 1e-10
 
 
-@pytest.mark.slow
 def test_sequential_map_equals_vmap(batch):
     rows, views, fits, _ = batch
     idx = np.array([rows[n][0] for n in ("sor 1.1", "noisy sphere 1", "handle")])

@@ -109,7 +109,6 @@ def test_jit_calibrated_intrinsics(scene, calibration):
     _close(_fit(P, losses.BundleStart.of(calibration)), coarse)
 
 
-@pytest.mark.slow
 def test_vmap_calibrated_intrinsics_over_trials(scene, calibration):
     _, outs, *_ = scene
     P = jnp.stack([jnp.stack([sorjax.make_outline(scenes.paper_noise(o, 1.0, 100 * t + i), N_POINTS).points
@@ -171,7 +170,6 @@ def test_grad_bundle_residuals(scene):
     np.testing.assert_allclose(J[..., 2], fd, rtol=1e-5, atol=1e-8 * float(jnp.abs(J[..., 2]).max()))
 
 
-@pytest.mark.slow
 def test_grad_calibrated_intrinsics_wrt_points(scene, calibration):
     _, _, P, *_ = scene
     s = losses.BundleStart.of(calibration)
