@@ -23,7 +23,7 @@ import numpy as np
 
 import sorjax
 from sorjax import scenes
-from sorjax._calibration import code_name
+from sorjax._messages import code_name
 
 VERDICTS = ("ok", "widened", "contradicted")
 CULPRITS = ("", " (aspect)", " (views)", " (lens)", " (fixed)")

@@ -35,7 +35,7 @@ import numpy as np
 
 import sorjax
 from sorjax import scenes
-from sorjax._calibration import _view_angles_deg, code_name
+from sorjax._messages import _view_angles_deg, code_name
 
 from _common import recorded
 

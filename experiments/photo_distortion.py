@@ -36,7 +36,7 @@ import numpy as np
 
 import sorjax
 from sorjax import render, scenes
-from sorjax._calibration import code_name
+from sorjax._messages import code_name
 
 
 def main(argv=None):

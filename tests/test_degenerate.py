@@ -403,7 +403,7 @@ def test_collapsed_focal_length_is_never_determined():
     # refused as undetermined, and so is the principal point estimated with it
     import jax.numpy as jnp
 
-    from sorjax._calibration import _implausible_text
+    from sorjax._messages import _implausible_text
     from sorjax.core import Options
     from sorjax.core._assess import COLLAPSED_FOCAL, PLAUSIBLE, WIDE_FOV, assess, implausible, outline_extent
 

@@ -12,7 +12,7 @@ import pytest
 ROOT = pathlib.Path(__file__).resolve().parents[1] / "sorjax"
 
 #: Bottom to top: images -> outlines -> per-view homologies -> linear methods ->
-#: bundle -> checks and uncertainty -> calibration -> images, reports, experiments, CLI.
+#: bundle -> checks and uncertainty -> messages -> calibration -> images, reports, experiments, CLI.
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("foundation", ("sorjax._checks", "sorjax._compile", "sorjax._files", "sorjax._curves",
                     "sorjax.core._options")),
@@ -24,6 +24,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("verdict helpers", ("sorjax.core._assess",)),
     ("bundle", ("sorjax.core._bundle",)),
     ("checks and uncertainty", ("sorjax.core._checks", "sorjax.core._result", "sorjax._uncertainty")),
+    ("messages", ("sorjax._messages",)),
     ("calibration", ("sorjax.core._calibrate", "sorjax.core._shard", "sorjax.core", "sorjax._homology",
                      "sorjax._calibration", "sorjax.losses")),
     ("scenes and images", ("sorjax.scenes", "sorjax._segment", "sorjax._photo", "sorjax.render",

@@ -27,7 +27,7 @@ import numpy as np
 
 from .. import core, scenes
 from .._compile import options_for_runs
-from .._calibration import code_name, view_notes, verdict_notes
+from .._messages import code_name, verdict_notes, view_notes
 from .._outline import is_jagged, resample_closed, signed_area, smooth_jagged
 from ._config import Config, SceneConfig
 
