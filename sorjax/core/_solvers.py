@@ -15,6 +15,12 @@ do not determine (``NULL_RCOND^2`` is the bundle covariance's null eigenvalue
 threshold).  With a plain QR step, a degenerate view set (a level camera and upright
 objects, free aspect ratio) let fv drift from 800 to 1025 px along its null direction,
 where the damped Levenberg-Marquardt step stays put.
+
+Both methods are one loop, :func:`least_squares` (a ``lax.while_loop``: residuals and
+Jacobian by one forward-mode pass, a thin SVD of the Jacobian a step), with the method,
+its tolerances and the step budget as data (:class:`Method`), so that a program that
+screens, polishes and falls back traces one solve.  Its solution is differentiable by
+the implicit function theorem (:func:`implicit_minimum`); the loop is not.
 """
 
 from __future__ import annotations
@@ -22,9 +28,8 @@ from __future__ import annotations
 from typing import Any, Callable, NamedTuple
 
 import jax
-import jax.numpy as jnp
-import numpy as np
 import jax.extend
+import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
 NULL_RCOND = 1e-6
