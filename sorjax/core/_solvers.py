@@ -257,6 +257,12 @@ def until_fresh_traced(solve_once: Callable[[Any], tuple], y0, out0=None) -> tup
     return out, y, steps
 
 
+def improves(cost, cost0):
+    """Whether a polish round's end (cost ``cost``) is no worse than its start (``cost0``,
+    to 1e-12 relative): else Levenberg-Marquardt starts again from the start."""
+    return jnp.isfinite(cost) & (cost <= cost0 * (1 + 1e-12))
+
+
 def pick(cond, a, b):
     """``a`` where ``cond`` else ``b``, leaf by leaf (two pytrees of one structure)."""
     return jax.tree_util.tree_map(lambda x, y: jnp.where(cond, x, y), a, b)
@@ -282,7 +288,7 @@ def polish_traced(run: Callable[[Any, Method], Solved], y0, cost0, gn: Method, l
     def body(c):
         i, _, start, _, steps = c
         got = run(start, pick(i == 0, gn, lm))
-        improved = jnp.isfinite(got.cost) & (got.cost <= cost0 * (1 + 1e-12))
+        improved = improves(got.cost, cost0)
         again = (i == 0) & ~(got.ok & improved)  # Gauss-Newton failed: Levenberg-Marquardt
         start = pick(improved, got.y, y0)
         return i + 1, jnp.where(again, 2, 1).astype(jnp.int32), start, got, steps + jnp.asarray(got.steps, jnp.int32)

@@ -55,7 +55,7 @@ from ._field import DistanceField
 from ._symmetry import homology_matrix, symmetry_checked, symmetry_feet, symmetry_residuals, transfer
 from ._noise import (estimate_noise, jacobian_and_normal_sensitivity, knot_spacing_px, noise_geometry, noise_meat,
                       sample_normals, smoothed_outline, unit_blocks)
-from ._solvers import Method, is_stale, least_squares, pick, solvers, until_fresh_traced
+from ._solvers import Method, improves, is_stale, least_squares, pick, solvers, until_fresh_traced
 from ._options import Options
 from ._prepare import Views
 
@@ -194,19 +194,17 @@ def refine(field: DistanceField, samples, weights, p0, v0, E, max_steps, method:
     the closest points searched near ``hints`` (N,) (:func:`sorjax.core._symmetry.symmetry_feet`
     at ``p0``; None: searched here).  Returns ``(v, l, cost, converged, steps, p, r,
     stale, feet)``: ``r`` the whole-outline residuals, ``stale`` whether they differ
-    from the solver's hinted ones (always ``False`` for "screen", whose runs are not
+    from the solver's hinted ones (a screen's caller ignores it: its runs are not
     repeated), ``feet`` their closest-point parameters (the hints of a solve from ``p``):
     one pass, :func:`sorjax.core._symmetry.symmetry_checked`."""
     args = (field, samples, weights, v0, E)
     if hints is None:
         hints = symmetry_feet(*_unpack(p0, v0, E), samples, field)
-    screen = isinstance(method, str) and method == "screen"
     method = _SOLVERS[method] if isinstance(method, str) else method
     p, ok, steps = least_squares(_residuals, p0, args + (hints,), method, max_steps, samples.shape[0] + 1)
     v, l = _unpack(p, v0, E)
-    # the screen's runs are not re-run: its staleness is not traced
-    r, feet, r_near = symmetry_checked(v, l, samples, field, weights, None if screen else hints)
-    stale = jnp.asarray(False) if screen else is_stale(r, r_near)
+    r, feet, r_near = symmetry_checked(v, l, samples, field, weights, hints)
+    stale = is_stale(r, r_near)
     cost = jnp.sum(r**2) + jnp.sum(_barrier(v, l) ** 2)
     return v, l, cost, ok, steps, p, r, stale, feet
 
@@ -295,7 +293,7 @@ def _fit_loop(field, samples, weights, p0s, v0s, Es, n_valid, scale, options: Op
 
         # -- a polish solve (Gauss-Newton, or its Levenberg-Marquardt fallback)
         polishing = ~screening
-        improved = jnp.isfinite(cost) & (cost <= c["cost0"] * (1 + 1e-12))
+        improved = improves(cost, c["cost0"])
         fallback = polishing & ~lm_round & ~(ok & improved)
         round_done = polishing & ~fallback
         fit = _Fit(out[0], out[1], jnp.where(jnp.isfinite(c["cost0"]), cost, jnp.nan), ok,
