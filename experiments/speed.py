@@ -582,10 +582,10 @@ def components(points: np.ndarray, opts, methods: tuple[str, ...]) -> list[tuple
          (P, homs)),
         ("  one bundle (bundle_estimate)", lambda c, s, so: B.bundle_estimate.__wrapped__(
             c.points_n, c.used, c.inliers, c.l_n, s, so, jnp.nan, c.T, opts, base=c.problem), (c, seeds, seed_ok)),
-        ("    its seed loop (fit_bundle)", lambda p, l, s, so: B.fit_bundle(p, l, s, so, opts), (prob, c.l_n, seeds,
-                                                                                                   seed_ok)),
+        ("    its solver loop (fit_bundle: seeds, no-perspective reference)",
+         lambda p, l, s, so: B.fit_bundle(p, l, s, so, opts), (prob, c.l_n, seeds, seed_ok)),
         ("    covariance", lambda y, p, T: B.covariance.__wrapped__(y, p, T), (y, prob, c.T)),
-        ("    no-perspective fit", lambda y, p: B._orthographic_fit(y, p), (y, prob)),
+        ("    no-perspective fit on its own", lambda y, p: B.orthographic_cost(y, p), (y, prob)),
         ("  view scores (model checks)", lambda y, c: CH.view_scores(y, c.points_n, c.used, c.inliers, jnp.nan, c.T,
                                                                        opts, base=c.problem, ell=2.0), (y, c)),
     ]

@@ -184,23 +184,29 @@ def test_polish_falls_back_to_levenberg_marquardt():
     np.testing.assert_allclose(_flat(final.y), _flat(y), rtol=1e-8)
 
 
-def test_solves_in_the_calibration_program(monkeypatch):
+@pytest.mark.parametrize("model", ["free", "known aspect", "fixed principal point"])
+def test_solves_in_the_calibration_program(monkeypatch, model):
     """The whole calibration (:func:`sorjax.core.calibrate`: per-view fits, linear seeds,
-    bundle, covariance, model checks) traced by ``jax.make_jaxpr`` holds three solve
-    loops: the per-view fit (screen, polish and refits as one loop), the bundle (every
-    seed's Gauss-Newton round and Levenberg-Marquardt fallback as one loop) and the
-    bundle's no-perspective reference fit.  A further solver fails this test."""
+    bundle, covariance, model checks) traced by ``jax.make_jaxpr`` holds two solve
+    loops: the per-view fit (screen, polish and refits as one loop) and the bundle
+    (every seed's Gauss-Newton round, its Levenberg-Marquardt fallback and the
+    no-perspective reference fit as one loop) -- also with a known aspect ratio (the
+    free-aspect fit the check compares with runs through the same loop) and with fixed
+    intrinsics.  A further solver fails this test."""
     import sorjax
     from sorjax import core, scenes
     from sorjax.core import _solvers
 
     sc = scenes.two_spheres(f=700.0)
     points = jnp.stack([sorjax.make_outline(o).points for o in sc.outlines])
+    kw = {"free": {}, "known aspect": {"aspect": 1.0},
+          "fixed principal point": {"fixed": jnp.array([jnp.nan, jnp.nan, 320.0, 240.0])}}[model]
     traced = []
     inner = _solvers._minimise
     monkeypatch.setattr(_solvers, "_minimise", lambda *a, **k: traced.append(1) or inner(*a, **k))
-    jax.make_jaxpr(lambda p: core.calibrate(p))(points)
-    assert len(traced) == 3
+    jax.clear_caches()  # (the inner jitted functions' traces of an earlier test would hide their solves)
+    jax.make_jaxpr(lambda p: core.calibrate(p, **kw))(points)
+    assert len(traced) == 2
 
 
 

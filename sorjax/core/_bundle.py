@@ -71,7 +71,7 @@ from ._symmetry import homology_matrix, symmetry_checked, symmetry_feet, symmetr
 from ._linear import focal_from_principal_point, linear_estimates
 from ._noise import (NoiseGeometry, estimate_noise, jacobian_and_normal_sensitivity, knot_spacing_px, noise_geometry,
                      noise_meat, sample_normals, smoothed_outline, unit_blocks)
-from ._solvers import (NULL_RCOND, Method, Solved, computed_as, is_stale, least_squares, polish_traced, solvers,
+from ._solvers import (NULL_RCOND, Method, Solved, computed_as, is_stale, least_squares, pick, polish_traced, solvers,
                        traced_once, until_fresh_traced)
 from ._options import Options
 
@@ -396,65 +396,65 @@ ORTHO_LOG_F = 9.2
 # only the cost is needed, to about 1e-4 (the evidence agreed to 5 digits with the
 # bundle's tolerances on the two-sphere scene; 2.7 ms instead of 4.1 ms a call)
 _ORTHO_SOLVER = Method(True, 1e-4, 1e-6)
+ORTHO_MAX_STEPS = 100
 
 
-def orthographic_cost(y, problem: BundleProblem, max_steps: int = 100):
+def with_fixed(problem: BundleProblem) -> BundleProblem:
+    """``problem`` with ``fixed`` an array (all NaN where it was None: the same model,
+    bit for bit, :func:`pin_intrinsics`), so that the bundle's solve and the
+    no-perspective reference (:func:`orthographic_problem`) share one traced loop."""
+    if problem.fixed is not None:
+        return problem
+    return dataclasses.replace(problem, fixed=jnp.full(4, jnp.nan, problem.samples.dtype))
+
+
+def orthographic_problem(k, problem: BundleProblem) -> BundleProblem:
+    """The bundle's problem of the no-perspective reference at the bundle's chart ``k``
+    (4,): ``fv`` held at ``exp(ORTHO_LOG_F)`` (normalised units) and the principal point
+    at ``k``'s (it no longer matters there), ``fu`` free for a free aspect ratio (the
+    ratio ``fu / fv`` is what the outlines still show), the intrinsics the user fixed
+    held as given (:attr:`BundleProblem.fixed`; with ``fu`` fixed and ``fv`` free, ``fv``
+    is left free instead, from ``exp(ORTHO_LOG_F)``).  A problem of the same structure
+    as :func:`with_fixed`'s: one solve serves both."""
+    problem = with_fixed(problem)
+    user = problem.fixed
+    fv_free = jnp.isnan(problem.aspect) & jnp.isfinite(user[0]) & ~jnp.isfinite(user[1])
+    logf = jnp.where(fv_free, jnp.nan, jnp.asarray(ORTHO_LOG_F, k.dtype))
+    ortho = jnp.stack([jnp.asarray(jnp.nan, k.dtype), logf, k[2], k[3]])
+    return dataclasses.replace(problem, fixed=jnp.where(jnp.isfinite(user), user, ortho))
+
+
+def orthographic_start(y, problem: BundleProblem):
+    """Where the no-perspective reference starts from the bundle's solution ``y = (k
+    (4,), a)``: ``fv = exp(ORTHO_LOG_F)``, ``fu / fv`` as at ``y`` (free aspect ratio),
+    the same axes."""
+    k, a = y
+    ratio = jnp.where(jnp.isnan(problem.aspect), k[0] - k[1], 0.0)
+    logf = jnp.asarray(ORTHO_LOG_F, k.dtype)
+    return jnp.stack([logf + ratio, logf, k[2], k[3]]), a
+
+
+def orthographic_cost(y, problem: BundleProblem, max_steps: int = ORTHO_MAX_STEPS):
     """Cost (normalised units^2, summed over the samples) of the best camera with no
-    perspective, started from the bundle's solution ``y``.
+    perspective, started from the bundle's solution ``y = (k (4,), a)``
+    (:func:`orthographic_start`, :func:`orthographic_problem`).
 
-    The focal length is held at ``exp(ORTHO_LOG_F)`` (orthographic limit) and the
-    principal point at ``y``'s (it no longer matters there); the per-view axes and, for
-    free aspect, the ratio ``fu / fv`` are fitted.  ``cost - |r(y)|^2`` is the evidence
-    for perspective in the outlines, the only thing that fixes the focal length: when
-    it is no larger than noise or systematic errors of the outlines could make, the
-    focal length is not determined, whatever the bundle's covariance says (that
-    linearisation can be confident far from the truth under weak perspective).
+    ``cost - |r(y)|^2`` is the evidence for perspective in the outlines, the only thing
+    that fixes the focal length: when it is no larger than noise or systematic errors
+    of the outlines could make, the focal length is not determined, whatever the
+    bundle's covariance says (that linearisation can be confident far from the truth
+    under weak perspective).
 
-    Closest points are searched near where they were at the start, and the solve is
-    repeated from its end should one of them leave its window (as in :func:`solve`;
-    traced: :func:`sorjax.core._solvers.until_fresh_traced`)."""
-    return _orthographic_fit(y, problem, max_steps)[0]
-
-
-def _orthographic_fit(y, problem: BundleProblem, max_steps: int = 100):
-    """:func:`orthographic_cost` and the fitted ``z = (d, axes)`` (with ``k0``, the
-    padded ``k`` of ``y``): ``(cost, z, k0)``."""
-    k0, a0 = y
-    k0 = jnp.asarray(k0)
-    if k0.shape[0] == 3:  # known aspect, compact chart: pad it
-        k0 = jnp.concatenate([k0[:1], k0])
-
-    def once(state):
-        z, cost, stale, feet = _orthographic_solve(*state, k0, problem, max_steps=max_steps)
-        return cost, (z, feet), 0, stale
-
-    z0 = (k0[0] - k0[1], jnp.asarray(a0))
-    cost, (z, _), _ = until_fresh_traced(once, (z0, foot_parameters(_orthographic_params(z0, k0, problem), problem)),
-                                         jnp.zeros((), k0.dtype))
-    return cost, z, k0
-
-
-def _orthographic_params(z, k0, problem: BundleProblem):
-    """The bundle's parameters of the no-perspective camera ``z = (d, axes)``: focal
-    length ``exp(ORTHO_LOG_F)``, ``d = log(fu / fv)`` (ignored for a known aspect ratio)
-    and ``k0``'s principal point."""
-    d, a = z
-    logf = jnp.asarray(ORTHO_LOG_F, k0.dtype)
-    free = jnp.isnan(problem.aspect).astype(k0.dtype)
-    return jnp.concatenate([jnp.stack([logf + d / 2, logf - free * d / 2]), k0[2:]]), a
-
-
-@functools.partial(jax.jit, static_argnames=("max_steps",))
-def _orthographic_solve(z0, hints, k0, problem: BundleProblem, max_steps: int = 100):
-    """One solve of :func:`orthographic_cost` from ``z0`` (``hints`` its closest-point
-    parameters): ``(z, cost, stale, feet)``, ``feet`` those at ``z``."""
-
-    def res(z, hints):
-        return residuals(_orthographic_params(z, k0, problem), problem, hints)
-
-    z, _, _ = least_squares(res, z0, hints, _ORTHO_SOLVER, max_steps, problem.weights.size)
-    r, feet, r_near = checked_residuals(_orthographic_params(z, k0, problem), problem, hints)
-    return z, jnp.sum(r**2), is_stale(r, r_near), feet
+    The bundle (:func:`bundle_estimate`) fits it as one more round of its own solver
+    loop (:func:`_fit_bundle`); this is the same fit on its own.  Closest points are
+    searched near where they were at the start, and the solve is repeated from its end
+    should one of them leave its window (as in :func:`solve`)."""
+    y0 = orthographic_start(y, problem)
+    p = orthographic_problem(y[0], problem)
+    run, r0 = _runner(p, max_steps)
+    final, _ = polish_traced(run, (y0, foot_parameters(y0, p)), jnp.inf, _ORTHO_SOLVER, _ORTHO_SOLVER, r0,
+                             retry=False)
+    return final.cost
 
 
 @jax.jit
@@ -773,13 +773,22 @@ def fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Optio
 
 
 def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Options, T):
-    """:func:`fit_bundle`, and :func:`covariance`'s ``(cov, s2, ell)`` (``T`` the normalising
-    similarity) at the ``y`` returned: every polished seed's covariance is computed in
-    the loop (its Gauss-Newton step is the stationarity test of :func:`_converged`), so
-    that the bundle's program holds one covariance, not two.  ``(cov, s2, ell)`` is NaN when
-    no seed was tried (never: :func:`bundle_seeds` always gives one).  Returns ``(y,
-    ok, steps, residuals, (cov, s2, ell))``."""
+    """:func:`fit_bundle`, :func:`covariance`'s ``(cov, s2, ell)`` (``T`` the normalising
+    similarity) at the ``y`` returned, and the no-perspective reference fit from it
+    (:func:`orthographic_cost`).
+
+    One ``lax.while_loop`` whose rounds are the seeds, polished in turn until one
+    converges, then the reference: its problem (:func:`orthographic_problem`), start,
+    method and step budget are data, so the program holds one traced solve
+    (:func:`sorjax.core._solvers.polish_traced`) for both.  Every polished seed's
+    covariance is computed in the loop (its Gauss-Newton step is the stationarity test
+    of :func:`_converged`), so that the bundle's program holds one covariance, not two.
+    ``(cov, s2, ell)`` is NaN when no seed was tried (never: :func:`bundle_seeds` always
+    gives one).  Returns ``(y, ok, steps, residuals, (cov, s2, ell), (cost_o, y_o))``:
+    ``cost_o`` the reference's cost (normalised units^2) at its solution ``y_o`` (the
+    chart of :func:`orthographic_problem` at ``y``); ``steps`` counts the seeds' steps."""
     max_steps = options.bundle_max_steps
+    problem = with_fixed(problem)
     used = problem.used
     l = jnp.where(used[:, None], jnp.asarray(l_seeds_n, jnp.float64), jnp.asarray([1.0, 0.0, 0.0]))
     a0 = axis_params(l)
@@ -791,32 +800,41 @@ def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Opti
     S = ks.shape[0]
     # the seeds to try first, by cost (ties: the first given); the others last
     order = jnp.lexsort((jnp.arange(S), costs, ~seed_ok))
-    run, r0 = _runner(problem, max_steps)
-    n_res = problem.weights.size
-
-    def cond(c):
-        i, done = c[0], c[1]
-        return (i < S) & ~done & seed_ok[order[jnp.minimum(i, S - 1)]]
+    r0 = jnp.zeros(problem.weights.size)
+    n_res, V = problem.weights.size, problem.weights.shape[0]
+    n_cov = 4 + problem.n_dist
+    gn, lm = _SOLVERS["gn"], _SOLVERS["lm"]
+    SEED, REFERENCE, DONE = 0, 1, 2
 
     def body(c):
-        i, _, have, best_bad, best_cost, best_y, best_r, best_cov, total = c
-        j = order[i]
-        final, steps = polish_traced(run, ((ks[j], a0), feet0[j]), costs[j], _SOLVERS["gn"], _SOLVERS["lm"], r0)
+        i, phase, have, best_bad, best_cost, best_y, best_r, best_cov, total, ref = c
+        seed = phase == SEED
+        j = order[jnp.minimum(i, S - 1)]
+        # a seed's round, or the no-perspective reference from the best seed's end
+        prob = dataclasses.replace(problem, fixed=jnp.where(seed, problem.fixed,
+                                                            orthographic_problem(best_y[0], problem).fixed))
+        start = pick(seed, (ks[j], a0), orthographic_start(best_y, problem))
+        hints = jax.lax.cond(seed, lambda: feet0[j], lambda: foot_parameters(start, prob))
+        run, _ = _runner(prob, jnp.where(seed, max_steps, ORTHO_MAX_STEPS))
+        final, steps = polish_traced(run, (start, hints), jnp.where(seed, costs[j], jnp.inf),
+                                     pick(seed, gn, _ORTHO_SOLVER), pick(seed, lm, _ORTHO_SOLVER), r0, retry=seed)
         (y_end, feet), final = final.y, final._replace(y=final.y[0])
-        cov, s2, step, ell = covariance(y_end, problem, T, feet, options)
+        nan_cov = (jnp.full((n_cov, n_cov), jnp.nan), jnp.asarray(jnp.nan), jnp.asarray(jnp.nan), jnp.full(V, jnp.nan))
+        cov, s2, step, ell = jax.lax.cond(seed, lambda: covariance(y_end, problem, T, feet, options), lambda: nan_cov)
         y, ok, cost = _converged(final, problem, step)
-        better = ~have | (best_bad & ok) | ((best_bad == ~ok) & (cost < best_cost))
-        pick = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(better, a, b), new, old)  # noqa: E731
-        return (i + 1, ok, jnp.asarray(True), jnp.where(better, ~ok, best_bad), jnp.where(better, cost, best_cost),
-                pick(y, best_y), pick(final.out, best_r), pick((cov, s2, ell), best_cov), total + steps)
+        better = seed & (~have | (best_bad & ok) | ((best_bad == ~ok) & (cost < best_cost)))
+        more = (i + 1 < S) & ~ok & seed_ok[order[jnp.minimum(i + 1, S - 1)]]
+        nxt = jnp.where(seed, jnp.where(more, SEED, REFERENCE), DONE)
+        return (i + seed, nxt, have | seed, jnp.where(better, ~ok, best_bad), jnp.where(better, cost, best_cost),
+                pick(better, y, best_y), pick(better, final.out, best_r), pick(better, (cov, s2, ell), best_cov),
+                total + jnp.where(seed, steps, 0), pick(seed, ref, (final.cost, y_end)))
 
-    n_cov = 4 + problem.n_dist
-    init = (jnp.asarray(0, jnp.int32), jnp.asarray(False), jnp.asarray(False), jnp.asarray(True),
-            jnp.asarray(jnp.inf), (ks[order[0]], a0), jnp.full(n_res, jnp.nan),
-            (jnp.full((n_cov, n_cov), jnp.nan), jnp.asarray(jnp.nan), jnp.full(problem.weights.shape[0], jnp.nan)),
-            jnp.asarray(0, jnp.int32))
-    _, _, _, bad, _, y, r, cov, total = jax.lax.while_loop(cond, body, init)
-    return y, ~bad, total, r, cov
+    init = (jnp.asarray(0, jnp.int32), jnp.where(seed_ok[order[0]], SEED, REFERENCE), jnp.asarray(False),
+            jnp.asarray(True), jnp.asarray(jnp.inf), (ks[order[0]], a0), jnp.full(n_res, jnp.nan),
+            (jnp.full((n_cov, n_cov), jnp.nan), jnp.asarray(jnp.nan), jnp.full(V, jnp.nan)),
+            jnp.asarray(0, jnp.int32), (jnp.asarray(jnp.nan), (ks[order[0]], a0)))
+    _, _, _, bad, _, y, r, cov, total, ref = jax.lax.while_loop(lambda c: c[1] != DONE, body, init)
+    return y, ~bad, total, r, cov, ref
 
 
 def _runner(problem: BundleProblem, max_steps: int):
@@ -986,15 +1004,14 @@ def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, opt
     else:
         problem = with_model(base, aspect, fixed_n)
     frozen = jax.lax.stop_gradient(problem)  # the solvers: no tangents into their loops
-    y, ok, steps, r, cov = _fit_bundle(frozen, jax.lax.stop_gradient(l_n), jax.lax.stop_gradient(seeds), seed_ok,
-                                       options, jax.lax.stop_gradient(T))
+    y, ok, steps, r, cov, (cost_o, y_o) = _fit_bundle(frozen, jax.lax.stop_gradient(l_n),
+                                                      jax.lax.stop_gradient(seeds), seed_ok, options,
+                                                      jax.lax.stop_gradient(T))
     out, _ = _solved(y, problem, T, used, steps, ok, options, given=(cov, r))
-    y = out.y
-    cost_o, z, _ = _orthographic_fit(jax.lax.stop_gradient(y), frozen)
-    # its cost at the fitted z (envelope theorem: z's own derivative does not enter; z is
-    # passed, not closed over: computed_as's fn may close over no traced value)
-    cost_o = computed_as(cost_o, lambda k, p, z: jnp.sum(residuals(_orthographic_params(z, k, p), p) ** 2), y[0],
-                         problem, jax.lax.stop_gradient(z))
+    # the reference's cost at its solution (envelope theorem: y_o's own derivative does
+    # not enter; y_o is passed, not closed over: computed_as's fn may close over no traced value)
+    cost_o = computed_as(cost_o, lambda k, p, y_o: jnp.sum(residuals(y_o, orthographic_problem(k, p)) ** 2),
+                         out.y[0], problem, jax.lax.stop_gradient(y_o))
     return eqx.tree_at(lambda b: b.evidence, out, cost_o / T[0, 0] ** 2 - out.cost)
 
 

@@ -269,15 +269,17 @@ def pick(cond, a, b):
 
 
 def polish_traced(run: Callable[[Any, Method], Solved], y0, cost0, gn: Method, lm: Method,
-                  out0=None) -> tuple[Solved, Any]:
+                  out0=None, retry=True) -> tuple[Solved, Any]:
     """Gauss-Newton (``gn``) from ``y0`` (cost ``cost0``), then,
     only where Gauss-Newton did not converge or ended above ``cost0``,
     Levenberg-Marquardt (``lm``) from the better of its end and ``y0``.  One
     ``lax.while_loop`` of at most two rounds with the method as data, so ``run(y,
     method)`` (returning a :class:`Solved` of arrays) is traced once: under ``vmap`` a
     lane that needs no second round idles while another runs it.  ``out0``: arrays
-    shaped as ``Solved.out`` (None: found by tracing ``run`` once more).  Returns
-    ``(final, steps)``, the steps of both rounds."""
+    shaped as ``Solved.out`` (None: found by tracing ``run`` once more).  ``retry``
+    (bool, may be traced): False runs the first round only (one solve with ``gn``, which
+    may then be a damped method too).  Returns ``(final, steps)``, the steps of both
+    rounds."""
     if out0 is None:
         out0 = _zeros(jax.eval_shape(run, y0, gn).out)
     solved0 = Solved(y0, jnp.asarray(False), jnp.asarray(jnp.inf, jnp.float64), jnp.asarray(0, jnp.int32), out0)
@@ -289,7 +291,7 @@ def polish_traced(run: Callable[[Any, Method], Solved], y0, cost0, gn: Method, l
         i, _, start, _, steps = c
         got = run(start, pick(i == 0, gn, lm))
         improved = improves(got.cost, cost0)
-        again = (i == 0) & ~(got.ok & improved)  # Gauss-Newton failed: Levenberg-Marquardt
+        again = retry & (i == 0) & ~(got.ok & improved)  # Gauss-Newton failed: Levenberg-Marquardt
         start = pick(improved, got.y, y0)
         return i + 1, jnp.where(again, 2, 1).astype(jnp.int32), start, got, steps + jnp.asarray(got.steps, jnp.int32)
 
