@@ -507,6 +507,95 @@ def residual_jacobian(y, problem: BundleProblem, feet=None, normals: bool = Fals
     return J, r, feet
 
 
+class Linearisation(eqx.Module):
+    """The bundle's residuals at a solution and their Jacobian in an extended chart:
+    what the covariance and every model check read (:func:`linearise`), one
+    forward-mode pass instead of one per reader.
+
+    Attributes:
+        J: (V N, 5 + 4 V) the Jacobian of the residuals (normalised units) with respect
+            to, in order: the intrinsic chart ``(log fu, log fv, u0, v0)`` with nothing
+            held fixed (a known aspect ratio still ignores ``log fu``), the radial
+            distortion ``k1`` at 0 (the first order of :func:`distorted_transfer`), each
+            view's axis ``(theta, rho)``, and each view's vertex moved along two
+            directions orthogonal to it (the homology released from the pole-polar
+            constraint, :func:`sorjax.core._checks.view_scores`).
+        r: (V N,) the residuals (searched near ``feet``).
+        a: (V, N) each weighted residual's sensitivity to its own sample moving along
+            the outline's outward normal (the noise model's geometry,
+            :func:`noise_geometry_at`).
+        feet: (V, N) the closest-point parameters the residuals read.
+    """
+
+    J: Float[Array, "VN P"]
+    r: Float[Array, " VN"]
+    a: Float[Array, "V N"]
+    feet: Float[Array, "V N"]
+
+
+#: the columns of :attr:`Linearisation.J`: the intrinsic chart, k1, then per view
+LIN_K, LIN_K1, LIN_VIEWS = slice(0, 4), 4, 5
+
+
+def lin_axis_columns(V: int):
+    """(V, 2) the columns of each view's ``(theta, rho)`` in :attr:`Linearisation.J`."""
+    return LIN_VIEWS + jnp.arange(2 * V).reshape(V, 2)
+
+
+def lin_vertex_columns(V: int):
+    """(V, 2) the columns of each view's two vertex directions in :attr:`Linearisation.J`."""
+    return LIN_VIEWS + 2 * V + jnp.arange(2 * V).reshape(V, 2)
+
+
+def _vertex_basis(v):
+    """Two unit vectors orthogonal to ``v`` (3,) and to each other."""
+    e = jnp.eye(3)[jnp.argmin(jnp.abs(v))]
+    b1 = jnp.cross(v, e)
+    b1 = b1 / jnp.linalg.norm(b1)
+    return b1, jnp.cross(v, b1)
+
+
+def linearise(y, problem: BundleProblem, feet=None) -> Linearisation:
+    """:class:`Linearisation` of the pinhole bundle's residuals at ``y = (k (4,), a (V,
+    2))`` (``problem.n_dist == 0``; its fixed intrinsics are written into ``k`` and then
+    released: their columns are those of free parameters, for the check of the values
+    held, :func:`sorjax.core._checks.fixed_release`; a reader of the fitted model
+    zeroes them).  ``feet``: :func:`foot_parameters` at ``y`` when the caller has them
+    (else searched here).
+
+    The distortion column is the derivative at ``k1 = 0`` of :func:`distorted_transfer`
+    (``x' = D(W D^-1(x))``): ``D(u) = u + k1 delta(u) + O(k1^2)`` with ``delta(u) =
+    distort(u, K, 1) - u``, so ``x' = W(x - k1 delta(x)) + k1 delta(W x) + O(k1^2)``.
+    The vertex columns move ``v_x`` along :func:`_vertex_basis` (its scale does not
+    change the homology), which with the axis columns spans the release of the view's
+    homology from the pole-polar constraint."""
+    k, a = y
+    k = pin_intrinsics(k, problem.fixed)
+    free = dataclasses.replace(problem, fixed=None)
+    if feet is None:
+        feet = foot_parameters((k, a), free)
+    V = a.shape[0]
+    p0 = jnp.concatenate([k, jnp.zeros(1, k.dtype), a.reshape(-1), jnp.zeros(2 * V, k.dtype)])
+    v_basis = jax.lax.stop_gradient(jax.vmap(_vertex_basis)(pole_polar_pairs((k, a), free)[0]))
+    ones = jnp.ones(1, k.dtype)
+
+    def res(p, samples):
+        kk, e, aa, dv = p[:4], p[4], p[5:5 + 2 * V].reshape(V, 2), p[5 + 2 * V:].reshape(V, 2)
+        Kn = intrinsics_matrix(*unpack_intrinsics(kk, problem.aspect))
+        v, l = pole_polar_pairs((kk, aa), free)
+        v = v + dv[:, :1] * v_basis[0] + dv[:, 1:] * v_basis[1]
+
+        def one(v, l, x, field, w, h):
+            delta = lambda u: distort(u, Kn, ones) - u  # noqa: E731
+            xt = transfer(homology_matrix(v, l), x - e * delta(x))
+            return signed_distances(field, xt + e * delta(xt), h) * w
+
+        return jax.vmap(one)(v, l, samples, problem.fields, problem.weights, feet).reshape(-1)
+
+    J, r, sens = jacobian_and_normal_sensitivity(res, p0, problem.samples, problem_normals(problem))
+    return Linearisation(J=J, r=r, a=sens.reshape(problem.weights.shape), feet=feet)
+
+
 def problem_normals(problem: BundleProblem) -> Float[Array, "V N 2"]:
     """The outward unit normals of the outlines at their samples."""
     return jax.vmap(lambda f: sample_normals(f, problem.samples.shape[1]))(problem.fields)
@@ -520,7 +609,7 @@ def project_out(A, B):
 
 
 @jax.jit
-def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Options()):
+def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Options(), lin=None):
     """Covariance of the pixel intrinsics ``(fu, fv, u0, v0)`` at ``y`` (followed by
     ``(k1[, k2])`` with distortion, :func:`pixel_params`); returns
     ``(cov, s2, step, ell)`` with ``s2 = |r|^2 / (VN - p)`` (normalised units^2;
@@ -554,9 +643,17 @@ def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Optio
     them zero variance instead.
 
     ``feet``: :func:`foot_parameters` at ``y`` when the caller has it (a solver's
-    end), else None (searched here)."""
-    J, r, feet = residual_jacobian(y, problem, feet)
+    end), else None (searched here).  ``lin``: the :class:`Linearisation` at ``y`` (the
+    pinhole bundle's; the Jacobian, residuals and ``feet`` are read from it), or None
+    (computed here)."""
     nk = y[0].shape[0]
+    if lin is None:
+        J, r, feet = residual_jacobian(y, problem, feet)
+    else:
+        held = jnp.zeros(4, bool) if problem.fixed is None else jnp.isfinite(problem.fixed)
+        V = problem.weights.shape[0]
+        J = jnp.concatenate([jnp.where(held, 0.0, lin.J[:, LIN_K]), lin.J[:, LIN_VIEWS:LIN_VIEWS + 2 * V]], axis=1)
+        r, feet = lin.r, lin.feet
     s2 = residual_variance(r, y, problem)
     step = _step_length(J, r, s2)
     scale = 1.0 / T[0, 0]
@@ -784,9 +881,11 @@ def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Opti
     covariance is computed in the loop (its Gauss-Newton step is the stationarity test
     of :func:`_converged`), so that the bundle's program holds one covariance, not two.
     ``(cov, s2, ell)`` is NaN when no seed was tried (never: :func:`bundle_seeds` always
-    gives one).  Returns ``(y, ok, steps, residuals, (cov, s2, ell), (cost_o, y_o))``:
+    gives one).  Returns ``(y, ok, steps, residuals, (cov, s2, ell), (cost_o, y_o), lin)``:
     ``cost_o`` the reference's cost (normalised units^2) at its solution ``y_o`` (the
-    chart of :func:`orthographic_problem` at ``y``); ``steps`` counts the seeds' steps."""
+    chart of :func:`orthographic_problem` at ``y``); ``steps`` counts the seeds' steps;
+    ``lin`` the :class:`Linearisation` at ``y`` that the covariance read (the model
+    checks read it too)."""
     max_steps = options.bundle_max_steps
     problem = with_fixed(problem)
     used = problem.used
@@ -805,9 +904,13 @@ def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Opti
     n_cov = 4 + problem.n_dist
     gn, lm = _SOLVERS["gn"], _SOLVERS["lm"]
     SEED, REFERENCE, DONE = 0, 1, 2
+    nan_cov = (jnp.full((n_cov, n_cov), jnp.nan), jnp.asarray(jnp.nan), jnp.asarray(jnp.nan), jnp.full(V, jnp.nan))
+    N = problem.weights.shape[1]
+    nan_lin = Linearisation(J=jnp.full((n_res, LIN_VIEWS + 4 * V), jnp.nan), r=jnp.full(n_res, jnp.nan),
+                            a=jnp.full((V, N), jnp.nan), feet=jnp.full((V, N), jnp.nan))
 
     def body(c):
-        i, phase, have, best_bad, best_cost, best_y, best_r, best_cov, total, ref = c
+        i, phase, have, best_bad, best_cost, best_y, best_r, best_cov, total, ref, best_lin = c
         seed = phase == SEED
         j = order[jnp.minimum(i, S - 1)]
         # a seed's round, or the no-perspective reference from the best seed's end
@@ -819,22 +922,25 @@ def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Opti
         final, steps = polish_traced(run, (start, hints), jnp.where(seed, costs[j], jnp.inf),
                                      pick(seed, gn, _ORTHO_SOLVER), pick(seed, lm, _ORTHO_SOLVER), r0, retry=seed)
         (y_end, feet), final = final.y, final._replace(y=final.y[0])
-        nan_cov = (jnp.full((n_cov, n_cov), jnp.nan), jnp.asarray(jnp.nan), jnp.asarray(jnp.nan), jnp.full(V, jnp.nan))
-        cov, s2, step, ell = jax.lax.cond(seed, lambda: covariance(y_end, problem, T, feet, options), lambda: nan_cov)
+        def at_solution():  # one Jacobian pass for the covariance and the model checks
+            lin = linearise(y_end, problem, feet)
+            return covariance(y_end, problem, T, feet, options, lin), lin
+
+        (cov, s2, step, ell), lin = jax.lax.cond(seed, at_solution, lambda: (nan_cov, nan_lin))
         y, ok, cost = _converged(final, problem, step)
         better = seed & (~have | (best_bad & ok) | ((best_bad == ~ok) & (cost < best_cost)))
         more = (i + 1 < S) & ~ok & seed_ok[order[jnp.minimum(i + 1, S - 1)]]
         nxt = jnp.where(seed, jnp.where(more, SEED, REFERENCE), DONE)
         return (i + seed, nxt, have | seed, jnp.where(better, ~ok, best_bad), jnp.where(better, cost, best_cost),
                 pick(better, y, best_y), pick(better, final.out, best_r), pick(better, (cov, s2, ell), best_cov),
-                total + jnp.where(seed, steps, 0), pick(seed, ref, (final.cost, y_end)))
+                total + jnp.where(seed, steps, 0), pick(seed, ref, (final.cost, y_end)), pick(better, lin, best_lin))
 
     init = (jnp.asarray(0, jnp.int32), jnp.where(seed_ok[order[0]], SEED, REFERENCE), jnp.asarray(False),
             jnp.asarray(True), jnp.asarray(jnp.inf), (ks[order[0]], a0), jnp.full(n_res, jnp.nan),
             (jnp.full((n_cov, n_cov), jnp.nan), jnp.asarray(jnp.nan), jnp.full(V, jnp.nan)),
-            jnp.asarray(0, jnp.int32), (jnp.asarray(jnp.nan), (ks[order[0]], a0)))
-    _, _, _, bad, _, y, r, cov, total, ref = jax.lax.while_loop(lambda c: c[1] != DONE, body, init)
-    return y, ~bad, total, r, cov, ref
+            jnp.asarray(0, jnp.int32), (jnp.asarray(jnp.nan), (ks[order[0]], a0)), nan_lin)
+    _, _, _, bad, _, y, r, cov, total, ref, lin = jax.lax.while_loop(lambda c: c[1] != DONE, body, init)
+    return y, ~bad, total, r, cov, ref, lin
 
 
 def _runner(problem: BundleProblem, max_steps: int):
@@ -971,10 +1077,11 @@ def pin_params(k, problem: BundleProblem):
 
 
 @jax.jit
-def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options: Options = Options(),
-                    fixed=None, base=None) -> BundleOut:
+def bundle_solution(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options: Options = Options(),
+                    fixed=None, base=None) -> tuple[BundleOut, Linearisation]:
     """The joint bundle, one pure function of arrays (jit, vmap over trials, grad:
-    the optimum is differentiated implicitly, :func:`implicit_solution`).
+    the optimum is differentiated implicitly, :func:`implicit_solution`), and the
+    :class:`Linearisation` at its solution (no gradient; what the model checks read).
 
     Args:
         points_n: (V, M, 2) outline points in the joint normalised coordinates ``T``.
@@ -995,7 +1102,7 @@ def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, opt
             ``inliers`` and ``used``, no aspect ratio, nothing fixed), when the caller
             has it (one per calibration, shared by every method), or None (built here).
 
-    Returns a :class:`BundleOut`."""
+    Returns ``(BundleOut, Linearisation)``."""
     used = jnp.asarray(used, bool)
     T = jnp.asarray(T, jnp.float64)
     fixed_n = None if fixed is None else fixed_chart(fixed, T)
@@ -1004,15 +1111,24 @@ def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, opt
     else:
         problem = with_model(base, aspect, fixed_n)
     frozen = jax.lax.stop_gradient(problem)  # the solvers: no tangents into their loops
-    y, ok, steps, r, cov, (cost_o, y_o) = _fit_bundle(frozen, jax.lax.stop_gradient(l_n),
-                                                      jax.lax.stop_gradient(seeds), seed_ok, options,
-                                                      jax.lax.stop_gradient(T))
+    y, ok, steps, r, cov, (cost_o, y_o), lin = _fit_bundle(frozen, jax.lax.stop_gradient(l_n),
+                                                           jax.lax.stop_gradient(seeds), seed_ok, options,
+                                                           jax.lax.stop_gradient(T))
     out, _ = _solved(y, problem, T, used, steps, ok, options, given=(cov, r))
     # the reference's cost at its solution (envelope theorem: y_o's own derivative does
     # not enter; y_o is passed, not closed over: computed_as's fn may close over no traced value)
     cost_o = computed_as(cost_o, lambda k, p, y_o: jnp.sum(residuals(y_o, orthographic_problem(k, p)) ** 2),
                          out.y[0], problem, jax.lax.stop_gradient(y_o))
-    return eqx.tree_at(lambda b: b.evidence, out, cost_o / T[0, 0] ** 2 - out.cost)
+    return eqx.tree_at(lambda b: b.evidence, out, cost_o / T[0, 0] ** 2 - out.cost), lin
+
+
+@jax.jit
+def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options: Options = Options(),
+                    fixed=None, base=None) -> BundleOut:
+    """The joint bundle, one pure function of arrays (jit, vmap over trials, grad:
+    the optimum is differentiated implicitly, :func:`implicit_solution`): :func:`bundle_solution`'s
+    :class:`BundleOut`; arguments as there."""
+    return bundle_solution(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options, fixed, base)[0]
 
 
 def _solved(y, problem: BundleProblem, T, used, steps, ok, options: Options, given=None):

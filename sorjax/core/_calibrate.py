@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._bundle import (DISTORTION_MODELS, BundleProblem, bundle_estimate, bundle_estimate_distorted, bundle_seeds,
+from ._bundle import (DISTORTION_MODELS, BundleProblem, bundle_estimate_distorted, bundle_seeds, bundle_solution,
                        distortion_gate, linearised_covariance, make_problem)
 from ._camera import intrinsics_matrix, transform_points
 from ._linear import linear_estimate
@@ -152,14 +152,15 @@ def _bundle(c: _Common, homs: ViewHomologies, aspect, options: Options, fixed=No
     (:func:`sorjax.core._checks.lens_release`, :func:`~sorjax.core._checks.fixed_release`;
     None without fixed intrinsics): ``(BundleOut, (S, delta_px2, n, lens, fixed))``."""
     seeds, seed_ok = bundle_seeds(homs.v_x, homs.l_s, c.used, c.T, aspect, fixed)
-    out = bundle_estimate(c.points_n, c.used, c.inliers, c.l_n, seeds, seed_ok, aspect, c.T, options, fixed,
-                          base=c.problem)
+    out, lin = bundle_solution(c.points_n, c.used, c.inliers, c.l_n, seeds, seed_ok, aspect, c.T, options, fixed,
+                               base=c.problem)
     y = jax.lax.stop_gradient(out.y)
     args = (y, c.points_n, c.used, c.inliers, aspect, c.T, options)
-    ell = jax.lax.stop_gradient(out.noise_ell)
-    lens = lens_release(*args, fixed, base=c.problem, ell=ell)
-    held = None if fixed is None else fixed_release(*args, fixed, base=c.problem, ell=ell)
-    return out, view_scores(*args, fixed, base=c.problem, ell=ell) + (lens, held)
+    # every check reads the one Jacobian pass at the solution (the covariance's)
+    kw = dict(base=c.problem, ell=jax.lax.stop_gradient(out.noise_ell), lin=lin)
+    lens = lens_release(*args, fixed, **kw)
+    held = None if fixed is None else fixed_release(*args, fixed, **kw)
+    return out, view_scores(*args, fixed, **kw) + (lens, held)
 
 
 def _distorted(c: _Common, homs: ViewHomologies, aspect, options: Options, distortion: str, fixed=None):

@@ -60,11 +60,10 @@ import jax.numpy as jnp
 from jax.scipy.special import gammaincc
 from jaxtyping import Array, Bool, Float, Int
 
-from ._bundle import (BundleProblem, fixed_chart, floored_rss, foot_parameters, free_intrinsics, make_problem,
-                       noise_blocks, pin_intrinsics, pixel_params, pole_polar_pairs, problem_normals, project_out,
-                       residual_jacobian, residual_variance, with_model)
-from ._symmetry import symmetry_residuals
-from ._noise import jacobian_and_normal_sensitivity, noise_meat
+from ._bundle import (LIN_K, LIN_K1, LIN_VIEWS, BundleProblem, Linearisation, fixed_chart, floored_rss,
+                       free_intrinsics, lin_axis_columns, lin_vertex_columns, linearise, make_problem, noise_blocks,
+                       pin_intrinsics, pixel_params, project_out, residual_jacobian, residual_variance, with_model)
+from ._noise import noise_meat
 from ._options import Options
 
 # ModelChecks.verdict
@@ -167,7 +166,8 @@ def duplicate_views(points: Float[Array, "V M 2"], valid: Bool[Array, " V"], opt
     return jnp.where(jnp.any(same, axis=1), jnp.argmax(same, axis=1), -1).astype(jnp.int32)
 
 
-def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=None, base=None, *, ell):
+def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=None, base=None, *, ell,
+                lin: Linearisation | None = None):
     """Score statistics of releasing each view's homology from the pole-polar
     constraint at the bundle's optimum ``y`` (normalised by ``T``); see the module's
     docstring.  Returns ``(S (V,), delta_px2 (V,), n (V,))``: the statistics
@@ -177,39 +177,26 @@ def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=N
     the joint model then does not count among its parameters.  ``base``: the
     calibration's shared problem (:func:`sorjax.core._bundle.with_model`), or None (built).
     ``ell``: (V,) each view's outline noise correlation length (px), the bundle's
-    :attr:`~sorjax.core._bundle.BundleOut.noise_ell`."""
+    :attr:`~sorjax.core._bundle.BundleOut.noise_ell`.  ``lin``: the
+    :class:`~sorjax.core._bundle.Linearisation` at ``y`` (its axis and vertex columns are
+    each view's release), or None (computed here)."""
     fixed_n = None if fixed is None else fixed_chart(fixed, T)
     problem = (make_problem(points_n, options.n_samples, aspect, inliers, used, fixed_n) if base is None
                else with_model(base, aspect, fixed_n))
-    feet = foot_parameters(y, problem)
-    v, l = pole_polar_pairs(y, problem)
+    if lin is None:
+        lin = linearise(y, problem)
     V, N = problem.samples.shape[:2]
-
-    def basis(v):  # two unit vectors orthogonal to v (and to each other)
-        e = jnp.eye(3)[jnp.argmin(jnp.abs(v))]
-        b1 = jnp.cross(v, e)
-        b1 = b1 / jnp.linalg.norm(b1)
-        return b1, jnp.cross(v, b1)
-
-    def one(v, l, s, f, w, h, nu):  # one view's release p (4,) at zero
-        def res(p, s):
-            th, rho = jnp.arctan2(l[1], l[0]) + p[0], -l[2] / jnp.linalg.norm(l[:2]) + p[1]
-            b1, b2 = basis(v)
-            lp = jnp.stack([jnp.cos(th), jnp.sin(th), -rho])
-            return symmetry_residuals(v + p[2] * b1 + p[3] * b2, lp, s, f, w, h)
-
-        return jacobian_and_normal_sensitivity(res, jnp.zeros(4), s, nu)
-
-    # one forward-mode pass per view: the releases' Jacobian (V, N, 4), the residuals
-    # (V, N) and their sensitivity to their samples moving along the normals (the noise
-    # model's geometry, :func:`sorjax.core._bundle.noise_geometry_at`)
-    J, r, a_nu = jax.vmap(one)(v, l, problem.samples, problem.fields, problem.weights, feet, problem_normals(problem))
+    # each view's release (V, N, 4): its axis (theta, rho) and its vertex's two
+    # directions, the columns of the one Jacobian pass (block diagonal across views)
+    cols = jnp.concatenate([lin_axis_columns(V), lin_vertex_columns(V)], axis=1)
+    J = jax.vmap(lambda Jv, c: Jv[:, c])(lin.J.reshape(V, N, -1), cols)
+    r = lin.r.reshape(V, N)
     n = jnp.sum(problem.weights, axis=1)
     n_par = jnp.sum(used) * 2 + n_free_intrinsics(aspect, fixed)
     s2 = floored_rss(r, problem) / jnp.maximum(jnp.sum(n) - n_par, 1.0)
     # the block-diagonal Jacobian of all views' releases, (V N, 4 V), for the meat
     G = (J[:, :, None, :] * jnp.eye(V)[:, None, :, None]).reshape(V * N, V * 4)
-    meat = noise_meat(G, noise_blocks(problem, feet, T, ell, s2, a_nu))
+    meat = noise_meat(G, noise_blocks(problem, lin.feet, T, ell, s2, lin.a))
     g = jnp.einsum("vnk,vn->vk", J, r)
     blocks = jax.vmap(lambda i: jax.lax.dynamic_slice(meat, (4 * i, 4 * i), (4, 4)))(jnp.arange(V))
     S = jax.vmap(lambda gi, Mi: gi @ jnp.linalg.pinv(Mi, hermitian=True) @ gi)(g, blocks)
@@ -304,7 +291,8 @@ class Release(eqx.Module):
     beyond: Bool[Array, ""]
 
 
-def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, options: Options, ell) -> Release:
+def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, options: Options, ell,
+                  jac=None) -> Release:
     """The score (Lagrange multiplier) test of releasing the intrinsic-chart entries
     ``release`` (nk,) of a model fitted at ``y = (k (nk,), a (V, 2))`` (normalised by
     ``T``), in ``problem``'s model where they are free (their values in ``k`` are the
@@ -314,9 +302,11 @@ def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, opt
     model's ``Var(g)`` (:func:`sorjax.core._bundle.noise_blocks`, correlation length ``ell``
     px, one or (V,) one per view), ``p = P(chi2_q > S)``;
     the Gauss-Newton step of the released model ``-(J^T J)^+ J^T r`` gives ``shift``
-    and ``released``.  No solve: one Jacobian."""
+    and ``released``.  No solve: one Jacobian.  ``jac``: ``(J, r, feet, a)`` as
+    :func:`sorjax.core._bundle.residual_jacobian` gives them with ``normals=True`` (read off
+    the bundle's :class:`~sorjax.core._bundle.Linearisation`), or None (computed here)."""
     nk = y[0].shape[0]
-    J, r, feet, a = residual_jacobian(y, problem, normals=True)
+    J, r, feet, a = residual_jacobian(y, problem, normals=True) if jac is None else jac
     rel = jnp.concatenate([jnp.asarray(release, bool), jnp.zeros(J.shape[1] - nk, bool)])
     Jr = jnp.where(rel[None, :], J, 0.0)
     Jh = jnp.where(rel[None, :], 0.0, J)
@@ -339,30 +329,47 @@ def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, opt
                    rejected=rejected, beyond=beyond)
 
 
-def lens_release(y, points_n, used, inliers, aspect, T, options: Options, fixed=None, base=None, *, ell) -> Release:
+def lens_release(y, points_n, used, inliers, aspect, T, options: Options, fixed=None, base=None, *, ell,
+                 lin: Linearisation | None = None) -> Release:
     """:func:`release_score` of the radial distortion ``k1`` that the pinhole bundle's
     solution ``y = (k (4,), a)`` holds at 0 (the model of
     :func:`sorjax.core._bundle.distorted_transfer` with one coefficient; ``fixed``: the
     intrinsics held fixed, px, or None); ``released[-1]`` is the ``k1`` one
     Gauss-Newton step gives.  ``base``: the calibration's problem
     (:func:`sorjax.core._bundle.with_model`), or None to build it; ``ell`` as
-    :func:`release_score`'s."""
+    :func:`release_score`'s; ``lin`` the :class:`~sorjax.core._bundle.Linearisation` at
+    ``y`` (its ``k1`` column is the release), or None (the distorted residuals'
+    Jacobian computed here)."""
     fixed_n = None if fixed is None else fixed_chart(fixed, T)
     pinhole = (make_problem(points_n, options.n_samples, aspect, inliers, used, fixed_n) if base is None
                else with_model(base, aspect, fixed_n))
     problem = dataclasses.replace(pinhole, n_dist=1)
     k = jnp.concatenate([y[0], jnp.zeros(1)])
-    return release_score((k, y[1]), problem, jnp.arange(5) == 4, T, options, ell)
+    jac = None
+    if lin is not None:
+        held = jnp.zeros(4, bool) if fixed_n is None else jnp.isfinite(fixed_n)
+        V = y[1].shape[0]
+        J = jnp.concatenate([jnp.where(held, 0.0, lin.J[:, LIN_K]), lin.J[:, LIN_K1:LIN_VIEWS + 2 * V]], axis=1)
+        jac = (J, lin.r, lin.feet, lin.a.reshape(-1))
+    return release_score((k, y[1]), problem, jnp.arange(5) == 4, T, options, ell, jac)
 
 
-def fixed_release(y, points_n, used, inliers, aspect, T, options: Options, fixed, base=None, *, ell) -> Release:
+def fixed_release(y, points_n, used, inliers, aspect, T, options: Options, fixed, base=None, *, ell,
+                  lin: Linearisation | None = None) -> Release:
     """:func:`release_score` of the intrinsics ``fixed`` (4,) px (NaN: free) that the
     bundle's solution ``y = (k (4,), a)`` holds: released all at once (as many degrees
     of freedom as are fixed and estimable: ``fu`` with a known aspect ratio follows
-    ``fv``); ``base`` as :func:`lens_release`'s."""
+    ``fv``); ``base`` and ``lin`` as :func:`lens_release`'s (the
+    :class:`~sorjax.core._bundle.Linearisation`'s intrinsic columns are those of the
+    released chart)."""
     chart = fixed_chart(fixed, T)
     problem = (make_problem(points_n, options.n_samples, aspect, inliers, used) if base is None
                else with_model(base, aspect))
     k = pin_intrinsics(y[0], chart)
     release = jnp.isfinite(chart) & free_intrinsics(aspect, None)
-    return release_score((k, y[1]), problem, release, T, options, ell)
+    jac = None
+    if lin is not None:
+        V = y[1].shape[0]
+        J = jnp.concatenate([lin.J[:, LIN_K], lin.J[:, LIN_VIEWS:LIN_VIEWS + 2 * V]], axis=1)
+        jac = (J, lin.r, lin.feet, lin.a.reshape(-1))
+    return release_score((k, y[1]), problem, release, T, options, ell, jac)
