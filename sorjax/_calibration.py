@@ -749,6 +749,57 @@ def calibrate(
       above ``WEAK_REL_STD`` (5 %; residual taken as at least 0.1 px) gives a warning
       saying what kind of extra view would help.
     """
+    outline_error, per_outline, measure, image_size, pp_fixed, f_fixed = _check_arguments(
+        method, aspect_ratio, distortion, n_samples, n_points, outline_error, image_size, principal_point,
+        focal_length)
+    prepared = _as_outlines(outlines, n_points)
+    outs, smoothed = [o for o, _ in prepared], [j for _, j in prepared]
+    noise = _outline_noise(outline_noise, outlines, len(outs))
+    noise_ell = _outline_noise(outline_noise_ell, outlines, len(outs), "outline_noise_ell", "noise_ell")
+    aspect_ratio = _check_views(len(outs), per_outline, pp_fixed, f_fixed, aspect_ratio)
+    homologies = _check_homologies(homologies, len(outs))
+    if homologies is None:
+        homologies = tuple(fit_homology(o, n_samples=n_samples, n_points=n_points) for o in outs)
+    homologies = tuple(homologies)
+    points = np.stack([np.asarray(o.points, np.float64) for o in outs])
+    homs = view_homologies(homologies, n_samples)
+    raw = list(outlines) if isinstance(outlines, (list, tuple, np.ndarray)) else []
+    outline_error, notes = _grid_floor(raw, smoothed, float(outline_error), measure)
+    if measure and per_outline is None:
+        per_outline = _own_errors(raw)
+    a = None if method in ("IIa",) or (method == "bundle" and aspect_ratio is None) else (
+        1.0 if aspect_ratio is None else float(aspect_ratio)
+    )
+    fixed = None
+    if pp_fixed is not None or f_fixed is not None:
+        fixed = (math.nan, math.nan if f_fixed is None else f_fixed) + (pp_fixed or (math.nan, math.nan))
+    aspect = math.nan if aspect_ratio is None else float(aspect_ratio)
+    size = (math.nan, math.nan) if image_size is None else image_size
+    run = functools.partial(_run_core, points, homs, method, aspect, image_size=size, distortion=distortion,
+                            fixed=fixed, noise=noise, noise_ell=noise_ell)
+    if measure:
+        r, outline_error, left_out, more = _measured(run, per_outline, float(outline_error), n_samples)
+        notes += more
+    else:
+        r, left_out = run(Options(n_samples=n_samples, outline_error_px=outline_error)), {}
+    dup_of = np.asarray(r.checks.duplicate_of)
+    notes = (notes + view_notes(homs, r.drop_reason, dup_of=dup_of) + model_notes(r, outline_error, fixed)
+             + distortion_notes(r, distortion, outline_error) + verdict_notes(r, method, a, outs))
+    for msg in notes:
+        warnings.warn(msg, stacklevel=2)
+    details = details_for(r, homs, outs, method, a, outline_error, image_size, pp_fixed, fixed)
+    cal = _calibration(r, homologies, method, a, details, left_out, notes, outline_error, distortion, pp_fixed,
+                       f_fixed, tuple(dropped_views(homs, r.drop_reason, dup_of)))
+    if throw and not cal.success:
+        raise CalibrationError(cal.message)
+    return cal
+
+
+def _check_arguments(method, aspect_ratio, distortion, n_samples, n_points, outline_error, image_size,
+                     principal_point, focal_length):
+    """:func:`calibrate`'s arguments checked before any outline is read: ``(outline_error
+    px, per-outline errors or None, measured?, image_size, principal point fixed, focal
+    length fixed)``; a ValueError that says what is wrong otherwise."""
     _check_method(method, aspect_ratio)
     if not isinstance(distortion, str) or distortion not in ("none", "k1", "k1k2"):
         raise ValueError(f"distortion must be 'none', 'k1' or 'k1k2' (OpenCV's radial terms); got {distortion!r}.")
@@ -768,115 +819,112 @@ def calibrate(
                              f"{image_size!r}.") from None
         image_size = (iw, ih)
     pp_fixed, f_fixed = _check_fixed(principal_point, focal_length, image_size, method)
-    prepared = _as_outlines(outlines, n_points)
-    outs, smoothed = [o for o, _ in prepared], [j for _, j in prepared]
-    noise = _outline_noise(outline_noise, outlines, len(outs))
-    noise_ell = _outline_noise(outline_noise_ell, outlines, len(outs), "outline_noise_ell", "noise_ell")
-    if per_outline is not None and len(per_outline) != len(outs):
-        raise ValueError(f"outline_error: got {len(per_outline)} per-outline errors for {len(outs)} outlines; give one "
+    return outline_error, per_outline, measure, image_size, pp_fixed, f_fixed
+
+
+def _check_views(n: int, per_outline, pp_fixed, f_fixed, aspect_ratio):
+    """The number of outlines ``n`` checked against what the calibration needs (a
+    ValueError that says what to add); returns the aspect ratio to impose (1 for one
+    view with a fixed principal point, or a fixed focal length, unless given)."""
+    if per_outline is not None and len(per_outline) != n:
+        raise ValueError(f"outline_error: got {len(per_outline)} per-outline errors for {n} outlines; give one "
                          "number (px) per outline, in the same order, or one number for all, or 'measured'.")
-    if len(outs) == 1 and pp_fixed is not None:
+    if n == 1 and pp_fixed is not None:
         aspect_ratio = 1.0 if aspect_ratio is None else aspect_ratio  # the single-view case: square pixels
     if f_fixed is not None and aspect_ratio is None:
         aspect_ratio = 1.0  # a fixed focal length fixes fu = aspect fv: square pixels unless told
-    if len(outs) < (1 if pp_fixed is not None else 2):
+    if n < (1 if pp_fixed is not None else 2):
         raise ValueError(
             f"calibration needs at least two outlines (views) of surfaces of revolution; got "
-            f"{len(outs)}. One outline gives only its own axis l_s and vanishing point v_x "
+            f"{n}. One outline gives only its own axis l_s and vanishing point v_x "
             "(use sorjax.fit_homology): two constraints on the four intrinsics (fu, fv, u0, v0), "
             "which leaves the camera undetermined. Add an outline from another view (the object "
             "moved or tilted, or another object), or fix the principal point (principal_point=(cx, cy) or "
             "'centre'; the command line's --principal-point CX CY or --centre-principal-point): one view then "
             "gives the focal length."
         )
-    homologies = _check_homologies(homologies, len(outs))
-    if homologies is None:
-        homologies = tuple(fit_homology(o, n_samples=n_samples, n_points=n_points) for o in outs)
-    homologies = tuple(homologies)
-    points = np.stack([np.asarray(o.points, np.float64) for o in outs])
-    homs = view_homologies(homologies, n_samples)
-    # outlines on a pixel grid carry at least their quantisation (or a mask's staircase)
-    raw = list(outlines) if isinstance(outlines, (list, tuple, np.ndarray)) else []
+    return aspect_ratio
+
+
+def _grid_floor(raw, smoothed, outline_error: float, measure: bool) -> tuple[float, list[str]]:
+    """The outline error raised to what outlines on a pixel grid carry at least (their
+    quantisation, a mask's staircase, a pixel trace: :func:`implied_outline_error`;
+    ``smoothed``: per outline, what :func:`sorjax._outline._as_outlines` smoothed away),
+    and the notes that say so: ``(outline_error px, notes)``."""
     implied = [implied_outline_error(o) for o in raw] or [(0.0, "")]
     floor_px, floor_kind = max(implied, key=lambda t: t[0])
     traces = [i for i, t in enumerate(implied) if t[1] == "pixel trace"]
-    floor_note = [f"outline{'s' if len(traces) > 1 else ''} {', '.join(map(str, traces))}: {PIXEL_TRACE_NOTE}"
-                  ] if traces else []
+    notes = [f"outline{'s' if len(traces) > 1 else ''} {', '.join(map(str, traces))}: {PIXEL_TRACE_NOTE}"
+             ] if traces else []
     jagged = [(i, j) for i, j in enumerate(smoothed) if j]
     if jagged:
         jit = [j[0] for _, j in jagged]
-        floor_note.append(f"outline{'s' if len(jagged) > 1 else ''} {', '.join(str(i) for i, _ in jagged)}: "
-                          + jagged_note(min(jit), max(j[1] for _, j in jagged), max(jit)))
-    if floor_px > float(outline_error):
+        notes.append(f"outline{'s' if len(jagged) > 1 else ''} {', '.join(str(i) for i, _ in jagged)}: "
+                     + jagged_note(min(jit), max(j[1] for _, j in jagged), max(jit)))
+    if floor_px > outline_error:
         which = [i for i, t in enumerate(implied) if t[0] == floor_px]
         why = {"staircase": "an unsmoothed staircase along or between pixels (up to half a pixel off the edge)",
                "pixel trace": "a binary mask's boundary pixels (its outline is as accurate as a binary mask's, "
                               f"about {BINARY_MASK_PX:g} px)",
                }.get(floor_kind, "rounded to whole or half pixels (1/sqrt(12) px of rounding error per coordinate)")
-        floor_note.append(
+        notes.append(
             f"outline{'s' if len(which) > 1 else ''} {', '.join(map(str, which))}: the coordinates are {why}; "
             f"the outline error is taken as {floor_px:.2g} px instead of the {'default' if measure else 'declared'} "
-            f"{float(outline_error):g} px. Sub-pixel outlines (sorjax.outlines_from_mask on a soft mask, or the 0.5 "
+            f"{outline_error:g} px. Sub-pixel outlines (sorjax.outlines_from_mask on a soft mask, or the 0.5 "
             "level of a blurred mask) are more accurate.")
         outline_error = floor_px
-    if measure and per_outline is None:
-        per_outline = _own_errors(raw)
-    floor_px = float(outline_error)
-    if measure:
-        outline_error, note = measured_outline_error(homs, points, per_outline, floor=floor_px,
-                                                     options=Options(n_samples=n_samples), noise=noise)
-        floor_note.append(note)
-        measured_at = len(floor_note) - 1
+    return outline_error, notes
+
+
+def _measured(run, per_outline, floor_px: float, n_samples: int):
+    """The calibration of outlines of measured quality (``outline_error="measured"``):
+    the outline error measured (:func:`measured_outline_error`, at least ``floor_px``),
+    a view the consistency check blames almost alone left out and the rest calibrated
+    again (:func:`dominant_view`, ``Options.measured_leave_out`` views at most), then the
+    leave-one-view-out check (:func:`jackknife`; pinhole only).  ``run(options,
+    leave_out=...)``: :func:`_run_core` with everything else bound (a
+    ``functools.partial``: the outlines, homologies, method, aspect ratio, image size,
+    lens model, fixed intrinsics and noise floors).  Returns ``(r, outline_error,
+    left_out {view: why}, notes)``."""
+    points, homs, method, aspect = run.args
+    kw = run.keywords
+
+    def measured(left_out):
+        return measured_outline_error(homs, points, per_outline, floor=floor_px, options=Options(n_samples=n_samples),
+                                      left_out=list(left_out), noise=kw["noise"])
+
+    outline_error, note = measured({})
+    notes = [note]
     options = Options(n_samples=n_samples, outline_error_px=float(outline_error))
-    a = None if method in ("IIa",) or (method == "bundle" and aspect_ratio is None) else (
-        1.0 if aspect_ratio is None else float(aspect_ratio)
-    )
-    fixed = None
-    if pp_fixed is not None or f_fixed is not None:
-        fixed = (math.nan, math.nan if f_fixed is None else f_fixed) + (pp_fixed or (math.nan, math.nan))
-    aspect = math.nan if aspect_ratio is None else float(aspect_ratio)
-    size = (math.nan, math.nan) if image_size is None else image_size
-    run = functools.partial(_run_core, points, homs, method, aspect, noise=noise, noise_ell=noise_ell)
-    r = run(options, size, distortion, fixed)
-    # outlines of measured quality (found in images): a view the consistency check blames
-    # almost alone is left out, and the rest calibrated again (Options.measured_leave_out)
+    r = run(options)
     left_out: dict[int, str] = {}
-    while measure and len(left_out) < int(options.measured_leave_out):
+    while len(left_out) < int(options.measured_leave_out):
         dom = dominant_view(r, options)
         if dom is None:
             break
         j, share = dom
-        floor_note.append(_left_out_text(r, j, share))
+        notes.append(_left_out_text(r, j, share))
         left_out[j] = f"inconsistent with the other views ({100 * share:.0f} % of the consistency score)"
-        outline_error, note = measured_outline_error(homs, points, per_outline, floor=floor_px,
-                                                     options=Options(n_samples=n_samples), left_out=list(left_out),
-                                                     noise=noise)
-        floor_note[measured_at] = note
+        outline_error, notes[0] = measured(left_out)
         options = Options(n_samples=n_samples, outline_error_px=float(outline_error))
-        r = run(options, size, distortion, fixed, leave_out=list(left_out))
+        r = run(options, leave_out=list(left_out))
+    if kw["distortion"] == "none":
+        r, jack_notes = jackknife(r, points, homs, method, aspect, options, kw["image_size"], kw["fixed"],
+                                  left_out=list(left_out), noise=kw["noise"], noise_ell=kw["noise_ell"])
+        notes += jack_notes
+    return r, outline_error, left_out, notes
 
-    if measure and distortion == "none":
-        r, jack_notes = jackknife(r, points, homs, method, aspect, options, size, fixed, left_out=list(left_out),
-                                  noise=noise, noise_ell=noise_ell)
-        floor_note += jack_notes
-    dup_of = np.asarray(r.checks.duplicate_of)
-    notes = (floor_note + view_notes(homs, r.drop_reason, dup_of=dup_of) + model_notes(r, outline_error, fixed)
-             + distortion_notes(r, distortion, outline_error) + verdict_notes(r, method, a, outs))
-    for msg in notes:
-        warnings.warn(msg, stacklevel=2)
-    used = tuple(int(i) for i in np.flatnonzero(r.used))
-    details = details_for(r, homs, outs, method, a, outline_error, image_size, pp_fixed, fixed)
-    cal = Calibration(
+
+def _calibration(r, homologies, method: str, a, details, left_out, notes, outline_error, distortion: str, pp_fixed,
+                 f_fixed, dropped) -> Calibration:
+    """The :class:`Calibration` of the core's result ``r`` (numpy) and its texts."""
+    n = {"none": 0, "k1": 1, "k1k2": 2}[distortion]
+    return Calibration(
         jnp.asarray(r.K), jnp.asarray(r.omega), homologies, _code_item(r.result), jnp.asarray(r.covariance),
         jnp.asarray(r.cost), jnp.asarray(r.view_rms[r.used]), jnp.asarray(r.steps), jnp.asarray(r.v_x[r.used]),
-        jnp.asarray(r.l_s[r.used]), method, a, used, details,
-        tuple((i, left_out.get(i, why)) for i, why in dropped_views(homs, r.drop_reason, dup_of)),
-        tuple(notes), float(r.perspective_px), float(r.perspective_z), float(outline_error),
-        jax.tree_util.tree_map(jnp.asarray, r.checks), distortion,
-        None if distortion == "none" else jnp.asarray(r.distortion[: {"k1": 1, "k1k2": 2}[distortion]]),
-        None if distortion == "none" else jnp.asarray(r.distortion_std[: {"k1": 1, "k1k2": 2}[distortion]]),
+        jnp.asarray(r.l_s[r.used]), method, a, tuple(int(i) for i in np.flatnonzero(r.used)), details,
+        tuple((i, left_out.get(i, why)) for i, why in dropped), tuple(notes), float(r.perspective_px),
+        float(r.perspective_z), float(outline_error), jax.tree_util.tree_map(jnp.asarray, r.checks), distortion,
+        None if n == 0 else jnp.asarray(r.distortion[:n]), None if n == 0 else jnp.asarray(r.distortion_std[:n]),
         pp_fixed, f_fixed,
     )
-    if throw and not cal.success:
-        raise CalibrationError(cal.message)
-    return cal
