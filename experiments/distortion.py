@@ -26,7 +26,7 @@ Tables:
    distortion-free bundle, k1 RMS, the linearised standard deviations the bundle
    reports for f and k1 (mean over trials; the efficiency bound of the extended model
    to first order), and how often the evidence gate says k1 is determined
-   (:func:`sorjax.core._bundle.distortion_gate`, declared outline error 0.1 px), with the
+   (:func:`sorjax.core._distorted.distortion_gate`, declared outline error 0.1 px), with the
    medians of its RMS gain per sample ``g`` (px) and its z-score.
 
     python experiments/distortion.py            # 8 scenes, 3 noise draws each
@@ -46,7 +46,8 @@ import numpy as np
 
 import sorjax
 from sorjax import scenes
-from sorjax.core._bundle import bundle_estimate_distorted, bundle_seeds, distortion_gate
+from sorjax.core._distorted import (bundle_estimate_distorted, distortion_gate)
+from sorjax.core._bundle import bundle_seeds
 from sorjax.core._camera import transform_points
 from sorjax.core import Options, fit_homologies, joint_transform
 from sorjax.core._assess import USED, outline_radius, view_verdicts

@@ -34,7 +34,7 @@ One run prints, on this machine:
    evaluation in the solvers' form (closest points searched near a hint), timed
    alone: a jitted ``jax.jacfwd`` of the per-view residuals
    (:func:`sorjax.core._viewfit._residuals`) and of the bundle's
-   (:func:`sorjax.core._bundle.residuals` on :func:`sorjax.core._bundle.make_problem`), each in
+   (:func:`sorjax.core._model.residuals` on :func:`sorjax.core._model.make_problem`), each in
    a ``lax.map`` of ``--floor-calls`` calls so that dispatch is amortised.  The floor
    leaves out the linear algebra of each step, the seed ranking, the covariances and
    the no-perspective evidence solve: it is a lower bound.
@@ -258,7 +258,7 @@ def residual_jacobian_times(points, homs, K, n_samples: int, calls: int) -> tupl
     import jax
     import jax.numpy as jnp
 
-    from sorjax.core import _bundle
+    from sorjax.core import _bundle, _model
     from sorjax.core._camera import transform_points
     from sorjax._homology import symmetry_feet
     from sorjax.core import joint_transform, prepare_views
@@ -281,12 +281,12 @@ def residual_jacobian_times(points, homs, K, n_samples: int, calls: int) -> tupl
     V = points.shape[0]
     used = jnp.ones(V, bool)
     Tj = joint_transform(points, used)
-    problem = _bundle.make_problem(transform_points(Tj, points), n_samples, None, jnp.asarray(homs.inliers, float), used)
+    problem = _model.make_problem(transform_points(Tj, points), n_samples, None, jnp.asarray(homs.inliers, float), used)
     Kn = np.asarray(Tj) @ (K if np.all(np.isfinite(K)) and K[0, 0] > 0 and K[1, 1] > 0 else np.eye(3) * 1000)
     k = jnp.asarray([np.log(Kn[0, 0]), np.log(Kn[1, 1]), Kn[0, 2], Kn[1, 2]])
-    a = _bundle.axis_params(jnp.asarray(homs.l_s) @ jnp.linalg.inv(Tj))
+    a = _model.axis_params(jnp.asarray(homs.l_s) @ jnp.linalg.inv(Tj))
     y = (k, a)
-    bh = _bundle.foot_parameters(y, problem)
+    bh = _model.foot_parameters(y, problem)
     ys = (k + 1e-6 * jnp.asarray(rng.standard_normal((calls, 4))),
           a + 1e-6 * jnp.asarray(rng.standard_normal((calls,) + a.shape)))
     t_bundle = _time_map(_value_and_jacfwd(_bundle._hinted_residuals), ys, (problem, bh))
@@ -563,6 +563,8 @@ def components(points: np.ndarray, opts, methods: tuple[str, ...]) -> list[tuple
     import jax.numpy as jnp
 
     from sorjax.core import _bundle as B
+    from sorjax.core import _covariance as B_covariance
+    from sorjax.core import _model as B_model
     from sorjax import core
     from sorjax.core import _calibrate as C
     from sorjax.core import _checks as CH
@@ -574,7 +576,7 @@ def components(points: np.ndarray, opts, methods: tuple[str, ...]) -> list[tuple
     homs = jax.jit(lambda p: core.fit_homologies(p, opts, True))(P)
     c = jax.jit(lambda p, h: C._common(p, h, jnp.ones(p.shape[0], bool), opts))(P, homs)
     seeds, seed_ok = B.bundle_seeds(homs.v_x, homs.l_s, c.used, c.T, jnp.nan)
-    prob = B.with_model(c.problem, jnp.nan)
+    prob = B_model.with_model(c.problem, jnp.nan)
     y = jax.jit(lambda p, l, s, so: B.fit_bundle(p, l, s, so, opts)[0])(prob, c.l_n, seeds, seed_ok)
     parts = [
         ("per-view fits (fit_homologies)", lambda p: core.fit_homologies(p, opts, True), (P,)),
@@ -584,7 +586,7 @@ def components(points: np.ndarray, opts, methods: tuple[str, ...]) -> list[tuple
             c.points_n, c.used, c.inliers, c.l_n, s, so, jnp.nan, c.T, opts, base=c.problem), (c, seeds, seed_ok)),
         ("    its solver loop (fit_bundle: seeds, no-perspective reference)",
          lambda p, l, s, so: B.fit_bundle(p, l, s, so, opts), (prob, c.l_n, seeds, seed_ok)),
-        ("    covariance", lambda y, p, T: B.covariance.__wrapped__(y, p, T), (y, prob, c.T)),
+        ("    covariance", lambda y, p, T: B_covariance.covariance.__wrapped__(y, p, T), (y, prob, c.T)),
         ("    no-perspective fit on its own", lambda y, p: B.orthographic_cost(y, p), (y, prob)),
         ("  view scores (model checks)", lambda y, c: CH.view_scores(y, c.points_n, c.used, c.inliers, jnp.nan, c.T,
                                                                        opts, base=c.problem, ell=2.0), (y, c)),

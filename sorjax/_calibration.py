@@ -703,7 +703,7 @@ def calibrate(
             was measured; the calibration's noise level (covariance, model checks,
             perspective evidence, whether a view's ``v_x`` is at infinity) then takes
             each view's residuals as at least this
-            (:attr:`sorjax.core._bundle.BundleProblem.noise`); the cost, and so ``K``, is
+            (:attr:`sorjax.core._model.BundleProblem.noise`); the cost, and so ``K``, is
             the same.
         outline_noise_ell: the correlation length along the curve (px) of the noise
             behind each ``outline_noise`` (:attr:`Homology.noise_ell` of the outline

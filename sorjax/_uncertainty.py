@@ -32,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .core._bundle import BundleProblem, axis_params, intrinsic_params, residuals, unpack_intrinsics
+from .core._model import (BundleProblem, axis_params, intrinsic_params, residuals, unpack_intrinsics)
 from .core._camera import normalising_transform, pixel_intrinsics, transform_points
 from .core._field import curve, setup
 from ._outline import DEFAULT_POINTS, make_outline

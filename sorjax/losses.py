@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .core._bundle import BundleProblem, axis_params, residuals, unpack_intrinsics
+from .core._model import (BundleProblem, axis_params, residuals, unpack_intrinsics)
 from .core._camera import normalising_transform, omega_matrix, omega_vector_from_intrinsics, pixel_intrinsics
 from .core._field import DistanceField, curve_points, sample_weights, setup, signed_distance, signed_distances
 from .core._field import make_field as _make_field
@@ -114,8 +114,8 @@ class BundleStart(eqx.Module):
 
 
 def _start_chart(T, start: BundleStart, n_views: int):
-    """The bundle's solver chart (:func:`sorjax.core._bundle.unpack_intrinsics`,
-    :func:`sorjax.core._bundle.axis_params`) at ``start``, in the coordinates ``x_n = T x``."""
+    """The bundle's solver chart (:func:`sorjax.core._model.unpack_intrinsics`,
+    :func:`sorjax.core._model.axis_params`) at ``start``, in the coordinates ``x_n = T x``."""
     Kn = T @ start.K
     if start.aspect_ratio is None:
         k0 = jnp.stack([jnp.log(Kn[0, 0]), jnp.log(Kn[1, 1]), Kn[0, 2], Kn[1, 2]])

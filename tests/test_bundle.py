@@ -12,7 +12,8 @@ import pytest
 
 import sorjax
 from sorjax import losses, scenes
-from sorjax.core._bundle import BundleProblem, axis_params, intrinsic_params, pole_polar_pairs, residuals, solve
+from sorjax.core._model import (BundleProblem, axis_params, intrinsic_params, pole_polar_pairs, residuals)
+from sorjax.core._bundle import solve
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +82,8 @@ def test_polish_methods_agree_and_the_remaining_step_vanishes(scene):
     reach the same optimum from the same start.  There the remaining Gauss-Newton step
     is a negligible fraction of a standard deviation (the test that accepts a solve
     stopped by its step limit as stationary); a few standard deviations away it is not."""
-    from sorjax.core._bundle import STATIONARY_SIGMAS, step_sigmas
+    from sorjax.core._bundle import STATIONARY_SIGMAS
+    from sorjax.core._covariance import step_sigmas
 
     outs = [scenes.paper_noise(o, 1.0, 40 + i) for i, o in enumerate(scene.outlines)]
     prob, y0 = problem_at_truth(scene, outs)
@@ -101,7 +103,8 @@ def test_padded_chart_equals_the_compact_chart_for_a_known_aspect(scene):
     It must give what the compact chart (log fv, u0, v0) gives: the same residuals
     whatever the ignored entry holds, the same optimum, the same pixel covariance and
     degrees of freedom (p = 2V + 3, not 2V + 4)."""
-    from sorjax.core._bundle import covariance, n_params
+    from sorjax.core._covariance import covariance
+    from sorjax.core._model import n_params
 
     outs = [scenes.paper_noise(o, 1.0, 70 + i) for i, o in enumerate(scene.outlines)]
     prob, (k4, a0) = problem_at_truth(scene, outs)
@@ -130,7 +133,7 @@ def test_noise_floor_raises_the_level_only_where_it_binds(scene):
     do not depend on it."""
     import dataclasses
 
-    from sorjax.core._bundle import covariance, floored_rss, residual_variance
+    from sorjax.core._covariance import (covariance, floored_rss, residual_variance)
 
     outs = [scenes.paper_noise(o, 1.0, 80 + i) for i, o in enumerate(scene.outlines)]
     prob, (k, a) = problem_at_truth(scene, outs)
@@ -175,7 +178,7 @@ def test_floored_rss_under_vmap_and_grad(scene):
     binding on view 0, not on the others)."""
     import dataclasses
 
-    from sorjax.core._bundle import floored_rss
+    from sorjax.core._covariance import floored_rss
 
     outs = [scenes.paper_noise(o, 1.0, 90 + i) for i, o in enumerate(scene.outlines)]
     prob, y = problem_at_truth(scene, outs)
@@ -201,7 +204,7 @@ def test_make_problem_is_pure_and_masks_views():
     """make_problem keeps nothing between calls (the caller passes a problem on): it is
     a pure function, the same under jit; a masked view keeps its slot with all weights
     zero, whatever its points hold (NaN included), and the used views are untouched."""
-    from sorjax.core._bundle import make_problem
+    from sorjax.core._model import make_problem
 
     t = np.linspace(0, 2 * np.pi, 256, endpoint=False)
     pts = np.stack([np.stack([np.cos(t), 0.7 * np.sin(t) + 0.1 * np.cos(3 * t)], 1)] * 3)
@@ -285,7 +288,8 @@ def test_orthographic_cost_vanishes_only_without_perspective(scene):
     mirror-symmetric outlines (orthographic views of a surface of revolution) fit it
     exactly, from axes started 1 degree off; the two-sphere scene's perspective outlines
     do not (their truth fits exactly, the orthographic camera about 0.75 px RMS worse)."""
-    from sorjax.core._bundle import make_problem, orthographic_cost
+    from sorjax.core._model import make_problem
+    from sorjax.core._bundle import orthographic_cost
 
     ortho, res = jax.jit(orthographic_cost), jax.jit(residuals)
 
@@ -336,7 +340,7 @@ def test_one_forward_pass_gives_the_jacobian_residuals_and_normal_sensitivity(sc
     evaluations: the residuals themselves, the Jacobian by central differences, and
     each residual's sensitivity to its sample moving along the outline's normal by
     central differences of the samples (the noise model's geometry reads it)."""
-    from sorjax.core._bundle import problem_normals, residual_jacobian
+    from sorjax.core._covariance import (problem_normals, residual_jacobian)
 
     prob, y = problem_at_truth(scene, scene.outlines)
     rng = np.random.default_rng(0)

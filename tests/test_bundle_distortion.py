@@ -1,4 +1,4 @@
-"""The bundle with radial distortion (sorjax.core._bundle.bundle_estimate_distorted) on exact
+"""The bundle with radial distortion (sorjax.core._distorted.bundle_estimate_distorted) on exact
 distorted scenes (sorjax.scenes ... distortion=(k1, k2)): K and k recovered, the
 evidence for distortion, the distortion-free path untouched.
 
@@ -12,8 +12,9 @@ import pytest
 
 import sorjax
 from sorjax import scenes
-from sorjax.core._bundle import (BundleProblem, bundle_estimate_distorted, bundle_seeds, distortion_gate, make_problem,
-                            n_params, residuals)
+from sorjax.core._model import (BundleProblem, make_problem, n_params, residuals)
+from sorjax.core._distorted import (bundle_estimate_distorted, distortion_gate)
+from sorjax.core._bundle import bundle_seeds
 from sorjax.core._camera import transform_points
 from sorjax.core import Options, joint_transform
 

@@ -15,7 +15,8 @@ import pytest
 
 import sorjax
 from sorjax import scenes
-from sorjax.core._bundle import bundle_estimate, bundle_seeds, make_problem, residuals
+from sorjax.core._bundle import (bundle_estimate, bundle_seeds)
+from sorjax.core._model import (make_problem, residuals)
 from sorjax.core._camera import transform_points
 from sorjax.core._linear import LINEAR_METHODS, linear_estimate, linear_estimates
 from sorjax.core import Options, joint_transform

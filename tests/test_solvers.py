@@ -190,9 +190,10 @@ def test_solves_in_the_calibration_program(monkeypatch, model):
     bundle, covariance, model checks) traced by ``jax.make_jaxpr`` holds two solve
     loops: the per-view fit (screen, polish and refits as one loop) and the bundle
     (every seed's Gauss-Newton round, its Levenberg-Marquardt fallback and the
-    no-perspective reference fit as one loop) -- also with a known aspect ratio (the
+    no-perspective reference fit as one loop).  With a known aspect ratio (the
     free-aspect fit the check compares with runs through the same loop) and with fixed
-    intrinsics.  A further solver fails this test."""
+    intrinsics the part after the per-view fits (:func:`sorjax.core.calibrate_homologies`)
+    holds the one bundle loop.  A further solver fails this test."""
     import sorjax
     from sorjax import core, scenes
     from sorjax.core import _solvers
@@ -201,12 +202,17 @@ def test_solves_in_the_calibration_program(monkeypatch, model):
     points = jnp.stack([sorjax.make_outline(o).points for o in sc.outlines])
     kw = {"free": {}, "known aspect": {"aspect": 1.0},
           "fixed principal point": {"fixed": jnp.array([jnp.nan, jnp.nan, 320.0, 240.0])}}[model]
+    homs = None if model == "free" else core.fit_homologies(points)
     traced = []
     inner = _solvers._minimise
     monkeypatch.setattr(_solvers, "_minimise", lambda *a, **k: traced.append(1) or inner(*a, **k))
     jax.clear_caches()  # (the inner jitted functions' traces of an earlier test would hide their solves)
-    jax.make_jaxpr(lambda p: core.calibrate(p, **kw))(points)
-    assert len(traced) == 2
+    if homs is None:
+        jax.make_jaxpr(lambda p: core.calibrate(p))(points)
+        assert len(traced) == 2
+    else:
+        jax.make_jaxpr(lambda p, h: core.calibrate_homologies(p, h, **kw))(points, homs)
+        assert len(traced) == 1
 
 
 

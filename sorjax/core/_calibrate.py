@@ -21,8 +21,10 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._bundle import (DISTORTION_MODELS, BundleProblem, bundle_estimate_distorted, bundle_seeds, bundle_solution,
-                       distortion_gate, linearised_covariance, make_problem)
+from ._distorted import (DISTORTION_MODELS, bundle_estimate_distorted, distortion_gate)
+from ._model import (BundleProblem, make_problem)
+from ._bundle import (bundle_seeds, bundle_solution)
+from ._covariance import linearised_covariance
 from ._camera import intrinsics_matrix, transform_points
 from ._linear import linear_estimate
 from ._assess import (DUPLICATE, USED, assess, axes_intersection, outline_extent, outline_radius,
@@ -64,7 +66,7 @@ def calibrate(points: Float[Array, "V M 2"], method: str = "bundle", aspect=jnp.
         valid: (V,) bool, views to consider (False: padding, left out); default all.
         distortion: the lens model of the bundle (static): "none" (a pinhole), "k1"
             or "k1k2" (OpenCV's radial terms, estimated with the intrinsics:
-            :func:`sorjax.core._bundle.bundle_estimate_distorted`; the bundle only).
+            :func:`sorjax.core._distorted.bundle_estimate_distorted`; the bundle only).
         fixed: (4,) intrinsics held at known values, ``(fu, fv, u0, v0)`` px with NaN
             where free (OpenCV's fixed-parameter flags: a principal point, a focal
             length), or None (all free; the program traced before fixed parameters
@@ -79,14 +81,14 @@ def calibrate(points: Float[Array, "V M 2"], method: str = "bundle", aspect=jnp.
             estimate of the noise level (covariance, model checks, perspective and
             distortion evidence, the solver's stopping test, whether a view's ``v_x``
             is at infinity: :func:`sorjax.core.with_noise_floor`) takes each view's
-            residuals as at least this (:attr:`sorjax.core._bundle.BundleProblem.noise`);
+            residuals as at least this (:attr:`sorjax.core._model.BundleProblem.noise`);
             the cost, and so the estimate of ``K``, is the same.
         noise_ell: (V,) the correlation length along the curve (px) of the noise
             behind each floor (:attr:`sorjax.Homology.noise_ell` of the outline before
             it was averaged; 0 or NaN: unknown), or None.  Where a floor binds, the
             covariance takes this as the view's noise correlation length instead of
             reading one off residuals that no longer show the noise
-            (:attr:`sorjax.core._bundle.BundleProblem.noise_ell`).  Without ``noise`` no
+            (:attr:`sorjax.core._model.BundleProblem.noise_ell`).  Without ``noise`` no
             floor binds, and it has no effect.
     """
     homs = fit_homologies(points, options)
@@ -164,8 +166,8 @@ def _bundle(c: _Common, homs: ViewHomologies, aspect, options: Options, fixed=No
 
 
 def _distorted(c: _Common, homs: ViewHomologies, aspect, options: Options, distortion: str, fixed=None):
-    """The bundle with radial distortion (:func:`sorjax.core._bundle.bundle_estimate_distorted`)
-    and the evidence gate for it (:func:`sorjax.core._bundle.distortion_gate`: the fit with
+    """The bundle with radial distortion (:func:`sorjax.core._distorted.bundle_estimate_distorted`)
+    and the evidence gate for it (:func:`sorjax.core._distorted.distortion_gate`: the fit with
     ``k = 0`` must be worse by the noise and by the declared outline error).  Returns
     ``(BundleOut, (k (2,), k_std (2,), g_px, z))``: with the evidence, the fit with
     distortion; without it, the distortion-free fit with its covariance widened by

@@ -22,7 +22,7 @@ at the edge (:mod:`sorjax._calibration`).
    parameters instead of 2) and the score (Lagrange multiplier) statistic of that
    release is computed at the joint optimum, ``S_j = g_j^T M_j^+ g_j`` with ``g_j =
    J_j^T r_j`` and ``M_j`` the correlated-noise covariance of ``g_j`` (the bundle's
-   outline noise model, :func:`sorjax.core._bundle.noise_blocks`).  No
+   outline noise model, :func:`sorjax.core._covariance.noise_blocks`).  No
    extra solve: one Jacobian of 4 columns per view.  ``S = sum_j S_j`` is compared
    with a chi-square of ``2 V - 4`` degrees of freedom (``2 V - 3`` with a known
    aspect ratio); ``delta_j = g_j^T (J_j^T J_j)^+ g_j`` (px^2, one Gauss-Newton step's
@@ -60,9 +60,9 @@ import jax.numpy as jnp
 from jax.scipy.special import gammaincc
 from jaxtyping import Array, Bool, Float, Int
 
-from ._bundle import (LIN_K, LIN_K1, LIN_VIEWS, BundleProblem, Linearisation, fixed_chart, floored_rss,
-                       free_intrinsics, lin_axis_columns, lin_vertex_columns, linearise, make_problem, noise_blocks,
-                       pin_intrinsics, pixel_params, project_out, residual_jacobian, residual_variance, with_model)
+from ._covariance import (LIN_K, LIN_K1, LIN_VIEWS, Linearisation, floored_rss, lin_axis_columns, lin_vertex_columns,
+                          linearise, noise_blocks, project_out, residual_jacobian, residual_variance)
+from ._model import (BundleProblem, fixed_chart, free_intrinsics, make_problem, pin_intrinsics, pixel_params, with_model)
 from ._noise import noise_meat
 from ._options import Options
 
@@ -175,10 +175,10 @@ def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=N
     each view's number of samples counted (sum of weights); NaN / 0 for views not
     used.  ``fixed`` (4,): intrinsics held fixed (px, NaN: free; None: none), which
     the joint model then does not count among its parameters.  ``base``: the
-    calibration's shared problem (:func:`sorjax.core._bundle.with_model`), or None (built).
+    calibration's shared problem (:func:`sorjax.core._model.with_model`), or None (built).
     ``ell``: (V,) each view's outline noise correlation length (px), the bundle's
     :attr:`~sorjax.core._bundle.BundleOut.noise_ell`.  ``lin``: the
-    :class:`~sorjax.core._bundle.Linearisation` at ``y`` (its axis and vertex columns are
+    :class:`~sorjax.core._covariance.Linearisation` at ``y`` (its axis and vertex columns are
     each view's release), or None (computed here)."""
     fixed_n = None if fixed is None else fixed_chart(fixed, T)
     problem = (make_problem(points_n, options.n_samples, aspect, inliers, used, fixed_n) if base is None
@@ -208,7 +208,7 @@ def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=N
 def n_free_intrinsics(aspect, fixed=None):
     """How many of ``(fu, fv, u0, v0)`` the bundle estimates: 4 with a free aspect
     ratio, 3 with a known one, less those held fixed (``fixed`` (4,) px, NaN: free;
-    :func:`sorjax.core._bundle.free_intrinsics`)."""
+    :func:`sorjax.core._model.free_intrinsics`)."""
     if fixed is None:
         return jnp.where(jnp.isnan(aspect), 4, 3)
     return jnp.sum(free_intrinsics(aspect, fixed)).astype(jnp.int32)
@@ -299,12 +299,12 @@ def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, opt
     held ones).  Columns of the Jacobian ``J = [J_h, J_r]`` (held, released) at ``y``:
     ``G = J_r - J_h (J_h^T J_h)^+ J_h^T J_r``, ``g = G^T r`` (``= J_r^T r`` at the held
     model's optimum), ``S = g^T M^+ g`` with ``M = G^T Sigma_r G`` the outline noise
-    model's ``Var(g)`` (:func:`sorjax.core._bundle.noise_blocks`, correlation length ``ell``
+    model's ``Var(g)`` (:func:`sorjax.core._covariance.noise_blocks`, correlation length ``ell``
     px, one or (V,) one per view), ``p = P(chi2_q > S)``;
     the Gauss-Newton step of the released model ``-(J^T J)^+ J^T r`` gives ``shift``
     and ``released``.  No solve: one Jacobian.  ``jac``: ``(J, r, feet, a)`` as
-    :func:`sorjax.core._bundle.residual_jacobian` gives them with ``normals=True`` (read off
-    the bundle's :class:`~sorjax.core._bundle.Linearisation`), or None (computed here)."""
+    :func:`sorjax.core._covariance.residual_jacobian` gives them with ``normals=True`` (read off
+    the bundle's :class:`~sorjax.core._covariance.Linearisation`), or None (computed here)."""
     nk = y[0].shape[0]
     J, r, feet, a = residual_jacobian(y, problem, normals=True) if jac is None else jac
     rel = jnp.concatenate([jnp.asarray(release, bool), jnp.zeros(J.shape[1] - nk, bool)])
@@ -333,11 +333,11 @@ def lens_release(y, points_n, used, inliers, aspect, T, options: Options, fixed=
                  lin: Linearisation | None = None) -> Release:
     """:func:`release_score` of the radial distortion ``k1`` that the pinhole bundle's
     solution ``y = (k (4,), a)`` holds at 0 (the model of
-    :func:`sorjax.core._bundle.distorted_transfer` with one coefficient; ``fixed``: the
+    :func:`sorjax.core._model.distorted_transfer` with one coefficient; ``fixed``: the
     intrinsics held fixed, px, or None); ``released[-1]`` is the ``k1`` one
     Gauss-Newton step gives.  ``base``: the calibration's problem
-    (:func:`sorjax.core._bundle.with_model`), or None to build it; ``ell`` as
-    :func:`release_score`'s; ``lin`` the :class:`~sorjax.core._bundle.Linearisation` at
+    (:func:`sorjax.core._model.with_model`), or None to build it; ``ell`` as
+    :func:`release_score`'s; ``lin`` the :class:`~sorjax.core._covariance.Linearisation` at
     ``y`` (its ``k1`` column is the release), or None (the distorted residuals'
     Jacobian computed here)."""
     fixed_n = None if fixed is None else fixed_chart(fixed, T)
@@ -360,7 +360,7 @@ def fixed_release(y, points_n, used, inliers, aspect, T, options: Options, fixed
     bundle's solution ``y = (k (4,), a)`` holds: released all at once (as many degrees
     of freedom as are fixed and estimable: ``fu`` with a known aspect ratio follows
     ``fv``); ``base`` and ``lin`` as :func:`lens_release`'s (the
-    :class:`~sorjax.core._bundle.Linearisation`'s intrinsic columns are those of the
+    :class:`~sorjax.core._covariance.Linearisation`'s intrinsic columns are those of the
     released chart)."""
     chart = fixed_chart(fixed, T)
     problem = (make_problem(points_n, options.n_samples, aspect, inliers, used) if base is None

@@ -190,7 +190,7 @@ def estimate_noise(geo: NoiseGeometry, r: Float[Array, "V N"], J: Float[Array, "
     view's correlation length, px).  Residuals that are all zero give ``sigma_n^2 = 0``.
 
     ``floor`` (V,): each view's residual sum of squares counted as at least this
-    (``n_j noise_j^2``, a noise floor: :func:`sorjax.core._bundle.floored_rss`), or None.
+    (``n_j noise_j^2``, a noise floor: :func:`sorjax.core._covariance.floored_rss`), or None.
     ``floor_ell`` (V,): the correlation length (px) of the noise behind each floor
     (NaN or <= 0: unknown), or None.  A view whose floor binds (above its residuals'
     sum of squares) and whose floor's correlation length is known takes that length

@@ -106,7 +106,7 @@ class Options(eqx.Module):
     * ``check_floor_px``: evidence below this RMS per sample (px) never fails a check:
       the numerical floor of the distance fields (exact outlines fit to < 4e-5 px).
 
-    Uncertainty (:func:`sorjax.core._bundle.covariance`, :mod:`sorjax.core._noise`):
+    Uncertainty (:func:`sorjax.core._covariance.covariance`, :mod:`sorjax.core._noise`):
 
     * ``covariance_smooth_px``: the Jacobian of the covariance is read off the
       outlines smoothed along the curve by a Gaussian of this many px (noisy normals

@@ -499,7 +499,7 @@ def _outliers(r_px, active, keep, options: Options):
 def _infinity_z(field, samples, weights, v, l, feet, scale, options: Options):
     """``(z, ell)``: ``z = |v_3| / std(v_3)`` of eq. 20's fit at ``(v, l)`` in a chart centred there
     (``feet``: the closest-point parameters at ``(v, l)``; ``scale`` px per unit).
-    The covariance is the sandwich of :func:`sorjax.core._bundle.covariance` for one view:
+    The covariance is the sandwich of :func:`sorjax.core._covariance.covariance` for one view:
     the Jacobian read off the outline smoothed by ``options.covariance_smooth_px``,
     the residuals' covariance from the outline noise model of :mod:`sorjax.core._noise`
     (level and correlation length ``ell`` px from the residuals).  With ``s^2 (J^T J)^-1``
@@ -611,7 +611,7 @@ def with_noise_floor(homs: ViewHomologies, noise, options: Options = Options()) 
     is higher (the standard error of ``v_3`` grows with the noise level), and
     ``at_infinity`` and ``is_conic`` decided again from it.  For outlines averaged with
     their own mirror image, whose residuals no longer show their noise
-    (:attr:`sorjax.core._bundle.BundleProblem.noise`): their ``v_x`` would otherwise pass as
+    (:attr:`sorjax.core._model.BundleProblem.noise`): their ``v_x`` would otherwise pass as
     finite far too easily.  ``rms`` itself is left as fitted.
 
     The scaling keeps the noise's correlation length that the fit read off the
@@ -621,7 +621,7 @@ def with_noise_floor(homs: ViewHomologies, noise, options: Options = Options()) 
     (median 1.4) the raw outline's own,
     which errs towards a finite ``v_x``.  It decides only the only-principal-point
     verdict (every view at infinity); the bundle's covariance takes the floor's own
-    length (:attr:`sorjax.core._bundle.BundleProblem.noise_ell`)."""
+    length (:attr:`sorjax.core._model.BundleProblem.noise_ell`)."""
     noise = jnp.asarray(noise, jnp.float64)
     higher = noise > homs.rms
     z = homs.infinity_z * jnp.where(higher, homs.rms / jnp.where(higher, noise, 1.0), 1.0)

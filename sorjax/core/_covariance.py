@@ -1,0 +1,330 @@
+"""The bundle linearised at a solution: one Jacobian pass, the covariance, the noise level.
+
+Uncertainty: at the optimum, the sandwich ``F^-1 G^T Sigma_r G F^-1`` of least squares
+(``G`` the intrinsics' Jacobian columns with the per-view parameters projected out,
+read off the outlines smoothed by a few pixels; ``F = G^T G``), with ``Sigma_r`` the
+residuals' covariance under a model of the outline noise whose level and correlation
+length along the curve are estimated from the residuals (:mod:`sorjax.core._noise`), pushed
+to the pixel intrinsics ``(fu, fv, u0, v0)`` through the Jacobian of that map;
+intrinsics the views do not determine at all get an infinite variance (see
+:func:`covariance`).  :func:`linearise` gives, in one forward-mode pass, the Jacobian
+that the covariance and every model check (:mod:`sorjax.core._checks`) read.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ._camera import intrinsics_matrix
+from ._distortion import distort
+from ._field import signed_distances
+from ._symmetry import homology_matrix, transfer
+from ._noise import (NoiseGeometry, estimate_noise, jacobian_and_normal_sensitivity, knot_spacing_px, noise_geometry,
+                     noise_meat, sample_normals, smoothed_outline, unit_blocks)
+from ._solvers import NULL_RCOND
+from ._options import Options
+from ._model import (BundleProblem, axis_params, foot_parameters, make_problem, n_params, pack_seeds, pin_intrinsics,
+                     pixel_params, pole_polar_pairs, residuals, unpack_intrinsics, with_model)
+
+
+NULL_EIGENVALUE = NULL_RCOND**2  # 1e-12: the Gauss-Newton polish takes no step where this calls null
+
+
+def residual_jacobian(y, problem: BundleProblem, feet=None, normals: bool = False):
+    """``(J, r, feet)`` at ``y``: the Jacobian of the stacked residuals
+    (:func:`residuals`) with respect to ``y`` flattened (``k`` first, then each view's
+    ``(theta, rho)``), the residuals (normalised units) and the closest-point
+    parameters they read (:func:`foot_parameters`; searched once here unless given),
+    held fixed as hints for both.
+
+    ``normals`` (static): also return ``a`` (V, N), each weighted residual's
+    sensitivity to its own sample moving along the outline's outward normal (what
+    :func:`noise_geometry_at` reads), as one more column of the same forward-mode pass:
+    ``(J, r, feet, a)``.  One traced evaluation of the residuals instead of three."""
+    flat, unravel = jax.flatten_util.ravel_pytree(y)
+    if feet is None:
+        feet = foot_parameters(y, problem)  # searched once; exact hints for J, r and the mirror pairs
+    def res(f, samples):
+        return residuals(unravel(f), eqx.tree_at(lambda q: q.samples, problem, samples), feet)
+
+    if normals:
+        J, r, a = jacobian_and_normal_sensitivity(res, flat, problem.samples, problem_normals(problem))
+        return J, r, feet, a.reshape(problem.weights.shape)
+    J, r = jax.jacfwd(lambda f: (res(f, problem.samples),) * 2, has_aux=True)(flat)  # r from the same pass
+    return J, r, feet
+
+
+class Linearisation(eqx.Module):
+    """The bundle's residuals at a solution and their Jacobian in an extended chart:
+    what the covariance and every model check read (:func:`linearise`), one
+    forward-mode pass instead of one per reader.
+
+    Attributes:
+        J: (V N, 5 + 4 V) the Jacobian of the residuals (normalised units) with respect
+            to, in order: the intrinsic chart ``(log fu, log fv, u0, v0)`` with nothing
+            held fixed (a known aspect ratio still ignores ``log fu``), the radial
+            distortion ``k1`` at 0 (the first order of :func:`distorted_transfer`), each
+            view's axis ``(theta, rho)``, and each view's vertex moved along two
+            directions orthogonal to it (the homology released from the pole-polar
+            constraint, :func:`sorjax.core._checks.view_scores`).
+        r: (V N,) the residuals (searched near ``feet``).
+        a: (V, N) each weighted residual's sensitivity to its own sample moving along
+            the outline's outward normal (the noise model's geometry,
+            :func:`noise_geometry_at`).
+        feet: (V, N) the closest-point parameters the residuals read.
+    """
+
+    J: Float[Array, "VN P"]
+    r: Float[Array, " VN"]
+    a: Float[Array, "V N"]
+    feet: Float[Array, "V N"]
+
+
+#: the columns of :attr:`Linearisation.J`: the intrinsic chart, k1, then per view
+LIN_K, LIN_K1, LIN_VIEWS = slice(0, 4), 4, 5
+
+
+def lin_axis_columns(V: int):
+    """(V, 2) the columns of each view's ``(theta, rho)`` in :attr:`Linearisation.J`."""
+    return LIN_VIEWS + jnp.arange(2 * V).reshape(V, 2)
+
+
+def lin_vertex_columns(V: int):
+    """(V, 2) the columns of each view's two vertex directions in :attr:`Linearisation.J`."""
+    return LIN_VIEWS + 2 * V + jnp.arange(2 * V).reshape(V, 2)
+
+
+def _vertex_basis(v):
+    """Two unit vectors orthogonal to ``v`` (3,) and to each other."""
+    e = jnp.eye(3)[jnp.argmin(jnp.abs(v))]
+    b1 = jnp.cross(v, e)
+    b1 = b1 / jnp.linalg.norm(b1)
+    return b1, jnp.cross(v, b1)
+
+
+def linearise(y, problem: BundleProblem, feet=None) -> Linearisation:
+    """:class:`Linearisation` of the pinhole bundle's residuals at ``y = (k (4,), a (V,
+    2))`` (``problem.n_dist == 0``; its fixed intrinsics are written into ``k`` and then
+    released: their columns are those of free parameters, for the check of the values
+    held, :func:`sorjax.core._checks.fixed_release`; a reader of the fitted model
+    zeroes them).  ``feet``: :func:`foot_parameters` at ``y`` when the caller has them
+    (else searched here).
+
+    The distortion column is the derivative at ``k1 = 0`` of :func:`distorted_transfer`
+    (``x' = D(W D^-1(x))``): ``D(u) = u + k1 delta(u) + O(k1^2)`` with ``delta(u) =
+    distort(u, K, 1) - u``, so ``x' = W(x - k1 delta(x)) + k1 delta(W x) + O(k1^2)``.
+    The vertex columns move ``v_x`` along :func:`_vertex_basis` (its scale does not
+    change the homology), which with the axis columns spans the release of the view's
+    homology from the pole-polar constraint."""
+    k, a = y
+    k = pin_intrinsics(k, problem.fixed)
+    free = dataclasses.replace(problem, fixed=None)
+    if feet is None:
+        feet = foot_parameters((k, a), free)
+    V = a.shape[0]
+    p0 = jnp.concatenate([k, jnp.zeros(1, k.dtype), a.reshape(-1), jnp.zeros(2 * V, k.dtype)])
+    v_basis = jax.lax.stop_gradient(jax.vmap(_vertex_basis)(pole_polar_pairs((k, a), free)[0]))
+    ones = jnp.ones(1, k.dtype)
+
+    def res(p, samples):
+        kk, e, aa, dv = p[:4], p[4], p[5:5 + 2 * V].reshape(V, 2), p[5 + 2 * V:].reshape(V, 2)
+        Kn = intrinsics_matrix(*unpack_intrinsics(kk, problem.aspect))
+        v, l = pole_polar_pairs((kk, aa), free)
+        v = v + dv[:, :1] * v_basis[0] + dv[:, 1:] * v_basis[1]
+
+        def one(v, l, x, field, w, h):
+            delta = lambda u: distort(u, Kn, ones) - u  # noqa: E731
+            xt = transfer(homology_matrix(v, l), x - e * delta(x))
+            return signed_distances(field, xt + e * delta(xt), h) * w
+
+        return jax.vmap(one)(v, l, samples, problem.fields, problem.weights, feet).reshape(-1)
+
+    J, r, sens = jacobian_and_normal_sensitivity(res, p0, problem.samples, problem_normals(problem))
+    return Linearisation(J=J, r=r, a=sens.reshape(problem.weights.shape), feet=feet)
+
+
+def problem_normals(problem: BundleProblem) -> Float[Array, "V N 2"]:
+    """The outward unit normals of the outlines at their samples."""
+    return jax.vmap(lambda f: sample_normals(f, problem.samples.shape[1]))(problem.fields)
+
+
+def project_out(A, B):
+    """``A - B (B^T B)^+ B^T A``: the columns of ``A`` with the span of ``B``'s columns
+    projected out (the information on ``A``'s parameters once ``B``'s are fitted is
+    ``G^T G`` of the result, a Schur complement)."""
+    return A - B @ (jnp.linalg.pinv(B.T @ B, hermitian=True) @ (B.T @ A))
+
+
+@jax.jit
+def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Options(), lin=None):
+    """Covariance of the pixel intrinsics ``(fu, fv, u0, v0)`` at ``y`` (followed by
+    ``(k1[, k2])`` with distortion, :func:`pixel_params`); returns
+    ``(cov, s2, step, ell)`` with ``s2 = |r|^2 / (VN - p)`` (normalised units^2;
+    each view's share at least its noise floor, :func:`floored_rss`),
+    ``step`` the Gauss-Newton step's Mahalanobis length (:func:`step_sigmas`) and
+    ``ell`` (V,) each view's outline noise correlation length (px, :mod:`sorjax.core._noise`).
+
+    The sandwich ``F^-1 G^T Sigma_r G F^-1`` of least squares, with
+    ``Sigma_r`` the residuals' covariance under the outline noise model of
+    :mod:`sorjax.core._noise` (its level and correlation length estimated from the
+    residuals; where a view's noise floor binds, its floor's length,
+    :attr:`BundleProblem.noise_ell`) and ``G`` the intrinsics' columns of the Jacobian with the per-view
+    pole-polar pairs' directions projected out, ``F = G^T G`` (the Schur complement
+    ``J_k^T J_k - J_k^T J_a (J_a^T J_a)^-1 J_a^T J_k``: the information on the
+    intrinsics ``k`` once the pairs ``a`` are fitted, whatever chart they are fitted
+    in), in the parameters ``(log fu, log fv, u0, v0)``, all of order one, so that
+    its eigenvalues compare directly.
+
+    ``G`` (and the noise model's geometry) is taken on the outlines smoothed by a
+    Gaussian of ``options.covariance_smooth_px`` px along the curve: the noise tilts
+    each target's normal, and a Jacobian read off the noisy normals overstates the
+    information (measured: two-sphere scene, the paper's noise at sigma 1 px, the
+    standard deviations 0.89x the RMS error with the noisy Jacobian, 0.93x smoothed by
+    6 px, 0.96x with the noise-free outlines' Jacobian; RMS error and residuals are
+    those of the unsmoothed outlines).
+
+    A direction with eigenvalue below ``NULL_EIGENVALUE`` times the largest is not
+    determined by the views at all (e.g. the focal length when every ``v_x`` is at
+    infinity): the pixel intrinsics that move along it get an *infinite* variance
+    (their covariances with the others NaN) -- a pseudo-inverse would silently give
+    them zero variance instead.
+
+    ``feet``: :func:`foot_parameters` at ``y`` when the caller has it (a solver's
+    end), else None (searched here).  ``lin``: the :class:`Linearisation` at ``y`` (the
+    pinhole bundle's; the Jacobian, residuals and ``feet`` are read from it), or None
+    (computed here)."""
+    nk = y[0].shape[0]
+    if lin is None:
+        J, r, feet = residual_jacobian(y, problem, feet)
+    else:
+        held = jnp.zeros(4, bool) if problem.fixed is None else jnp.isfinite(problem.fixed)
+        V = problem.weights.shape[0]
+        J = jnp.concatenate([jnp.where(held, 0.0, lin.J[:, LIN_K]), lin.J[:, LIN_VIEWS:LIN_VIEWS + 2 * V]], axis=1)
+        r, feet = lin.r, lin.feet
+    s2 = residual_variance(r, y, problem)
+    step = _step_length(J, r, s2)
+    scale = 1.0 / T[0, 0]
+    smooth = smoothed_problem(problem, options.covariance_smooth_px, scale)
+    Js, _, feet_s, a_s = residual_jacobian(y, smooth, normals=True)
+    # the intrinsics' columns with the per-view parameters' directions projected out
+    G = project_out(Js[:, :nk], Js[:, nk:])
+    F = G.T @ G  # = the Schur complement J_k^T J_k - J_k^T J_a (J_a^T J_a)^-1 J_a^T J_k
+    lam, U = jnp.linalg.eigh(0.5 * (F + F.T))
+    null = lam <= NULL_EIGENVALUE * jnp.max(jnp.abs(lam))
+    F_inv = (U * jnp.where(null, 0.0, 1.0 / jnp.where(null, 1.0, lam))) @ U.T
+    geo = noise_geometry_at(smooth, feet_s, scale, a_s)
+    ell, level = estimate_noise(geo, r.reshape(geo.a.shape), J, options.noise_ell_min_px, options.noise_ell_max_px,
+                                floor=view_floors(problem), floor_ell=problem.noise_ell)
+    meat = level * noise_meat(G, unit_blocks(geo, ell))
+    cov_k = F_inv @ meat @ F_inv
+
+    Gk = jax.jacfwd(lambda k: pixel_params(k, problem, T))(y[0])
+    cov = Gk @ cov_k @ Gk.T
+    GU = Gk @ U  # (4 [+ n_dist], nk): each pixel intrinsic along each eigenvector
+    leak = jnp.sum(jnp.where(null[None, :], GU**2, 0.0), axis=1)
+    undetermined = leak > 1e-8 * jnp.sum(GU**2, axis=1)
+    bad = undetermined[:, None] | undetermined[None, :]
+    cov = jnp.where(bad, jnp.nan, cov)
+    cov = jnp.where(jnp.eye(cov.shape[0], dtype=bool) & bad, jnp.inf, cov)
+    return cov, s2, step, ell
+
+
+def noise_blocks(problem: BundleProblem, feet, T, ell, s2, a) -> Float[Array, "V N N"]:
+    """The residuals' covariance per view (normalised units^2) under the outline noise
+    model (:mod:`sorjax.core._noise`) with correlation length ``ell`` px, one or (V,) one per
+    view (the bundle's, :attr:`BundleOut.noise_ell`), its level from the residual variance
+    ``s2`` of the model fitted at ``y``: ``sigma_n^2 = s2 n / tr S`` (``n`` samples
+    counted), ``a`` as for :func:`noise_geometry_at`.  What the model checks weigh
+    their scores with."""
+    geo = noise_geometry_at(problem, feet, 1.0 / T[0, 0], a)
+    S = unit_blocks(geo, ell)
+    tr = jnp.sum(jnp.trace(S, axis1=1, axis2=2))
+    return S * (s2 * jnp.sum(problem.weights) / jnp.maximum(tr, 1e-300))
+
+
+def view_floors(problem: BundleProblem):
+    """(V,) each view's residual sum of squares floor ``n_j noise_j^2`` (normalised
+    units^2; ``n_j`` the sum of its weights), or None without floors."""
+    if problem.noise is None:
+        return None
+    return jnp.sum(problem.weights, axis=1) * problem.noise**2
+
+
+def floored_rss(r, problem: BundleProblem):
+    """The residual sum of squares ``sum_j max(|r_j|^2, n_j noise_j^2)`` of the
+    residuals ``r`` ((V N,) or (V, N)), each view's at least its noise floor
+    (:attr:`BundleProblem.noise`; ``n_j`` the sum of its weights); ``|r|^2`` without
+    floors."""
+    rss = jnp.sum(jnp.reshape(r, problem.weights.shape) ** 2, axis=1)
+    if problem.noise is None:
+        return jnp.sum(rss)
+    return jnp.sum(jnp.maximum(rss, view_floors(problem)))
+
+
+def residual_variance(r, y, problem: BundleProblem, n_fixed=0):
+    """``s^2 = |r|^2 / (n - p)``: the residual variance of a fit with ``p`` parameters
+    (:func:`n_params`, less ``n_fixed`` held ones) to ``n`` weighted samples, each
+    view's residuals counted as at least its noise floor (:func:`floored_rss`)."""
+    dof = jnp.maximum(jnp.sum(problem.weights) - (n_params(y, problem) - n_fixed), 1)
+    return floored_rss(r, problem) / dof
+
+
+def _step_length(J, r, s2):
+    """The Gauss-Newton step's Mahalanobis length ``sqrt(r^T J (J^T J)^+ J^T r) / s``."""
+    g = J.T @ r
+    return jnp.sqrt(jnp.maximum(g @ jnp.linalg.pinv(J.T @ J, hermitian=True) @ g, 0.0) / jnp.maximum(s2, 1e-300))
+
+
+def smoothed_problem(problem: BundleProblem, smooth_px, scale) -> BundleProblem:
+    """``problem`` with every outline smoothed along the curve by a Gaussian of
+    ``smooth_px`` px (``scale`` px per normalised unit,
+    :func:`sorjax.core._noise.smoothed_outline`): new fields and samples, the same weights.
+    What :func:`covariance` reads the Jacobian from."""
+    N = problem.samples.shape[1]
+    fields, samples = jax.vmap(lambda f: smoothed_outline(f, N, smooth_px, scale))(problem.fields)
+    return dataclasses.replace(problem, fields=fields, samples=samples)
+
+
+def noise_geometry_at(problem: BundleProblem, feet, scale, a) -> NoiseGeometry:
+    """The outline noise model's geometry (:class:`sorjax.core._noise.NoiseGeometry`) of
+    the residuals with closest-point parameters ``feet`` (V, N): ``a`` (V, N), each
+    weighted residual's sensitivity to its own sample moving along the outward normal
+    (:func:`residual_jacobian` with ``normals=True``), the weights and the arc lengths
+    (``scale`` px per normalised unit)."""
+    M = problem.fields.knots.shape[1]
+    spacing = jax.vmap(lambda f: knot_spacing_px(f, scale))(problem.fields)
+    return noise_geometry(a.reshape(problem.weights.shape), problem.weights, feet, spacing, M)
+
+
+def step_sigmas(y, problem: BundleProblem):
+    """Mahalanobis length of the Gauss-Newton step at ``y``:
+    ``sqrt(r^T J (J^T J)^+ J^T r) / s`` with ``s^2 = |r|^2 / (n - p)``
+    (:func:`residual_variance`, the views' noise floors included)."""
+    J, r, _ = residual_jacobian(y, problem)
+    return _step_length(J, r, residual_variance(r, y, problem))
+
+
+@functools.partial(jax.jit, static_argnames=("n_samples",))
+def linearised_covariance(points_n, used, inliers, l_n, K, T, aspect, n_samples: int, base=None,
+                          options: Options = Options()):
+    """Covariance of ``(fu, fv, u0, v0)`` per px^2 of symmetry residual for an estimate
+    ``K`` (px): :func:`covariance` at ``K`` with the per-view axes ``l_n`` (normalised)
+    -- how well the used views determine the intrinsics whatever the estimator
+    (infinite where they don't).  Pure; arguments as :func:`bundle_estimate`'s
+    (``base`` its shared problem, or None)."""
+    used = jnp.asarray(used, bool)
+    problem = make_problem(points_n, n_samples, aspect, inliers, used) if base is None else with_model(base, aspect)
+    Kn = T @ K
+    k = pack_seeds(jnp.stack([Kn[0, 0], Kn[1, 1], Kn[0, 2], Kn[1, 2]])[None], jnp.ones(1, bool))[0]
+    l = jnp.where(used[:, None], jnp.asarray(l_n, jnp.float64), jnp.asarray([1.0, 0.0, 0.0]))
+    cov, s2, _, _ = covariance((k, axis_params(l)), problem, T, None, options)
+    return cov / (jnp.maximum(s2, 1e-300) / T[0, 0] ** 2)
+
+
+import jax.flatten_util  # noqa: E402  (registers the submodule used above)
