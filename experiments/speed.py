@@ -640,53 +640,87 @@ class _Captured(Exception):
     pass
 
 
+def solve_loops(points) -> int:
+    """The solve loops (:func:`sorjax.core._solvers.least_squares`'s loop) traced in
+    ``jax.make_jaxpr`` of the whole calibration (:func:`sorjax.core.calibrate`) of
+    ``points`` (V, M, 2): issue 41's target is 2 (the per-view fit, the bundle)."""
+    import jax
+    import jax.numpy as jnp
+
+    from sorjax import core
+    from sorjax.core import _solvers
+
+    traced, inner = [], _solvers._minimise
+    _solvers._minimise = lambda *a, **k: traced.append(1) or inner(*a, **k)
+    try:
+        jax.clear_caches()
+        jax.make_jaxpr(lambda p: core.calibrate(p))(jnp.asarray(points))
+    finally:
+        _solvers._minimise = inner
+    return len(traced)
+
+
 def calibrate_program(seed: int = 0, views: int = 4, runs: int = 8) -> dict:
-    """The compiled program of one ``sorjax.calibrate`` call on ``random_sor_scene(seed,
-    views)``'s exact outlines: the bundle core's (:func:`sorjax._calibration._core`)
-    operations (inlined StableHLO), trace + lower and XLA compile times (s); then a
-    first ``calibrate`` from a fresh compilation cache (wall s: the per-view fits' program
-    compiled, the core's read back from the cache just written) and the warm time of one
-    call (median of ``runs``).  Call with a fresh ``SORJAX_CACHE``."""
+    """The compiled programs of one ``sorjax.calibrate`` call on ``random_sor_scene(seed,
+    views)``'s exact outlines: for the per-view fit (:func:`sorjax._homology._fit_core`,
+    one outline) and the bundle core (:func:`sorjax._calibration._core`), the
+    operations (inlined StableHLO), trace + lower and XLA compile times (s); the solve
+    loops in the whole calibration (:func:`solve_loops`); then a first ``calibrate``
+    from a fresh compilation cache (wall s: the programs read back from the cache just
+    written) and the warm time of one call (median of ``runs``).  Call with a fresh
+    ``SORJAX_CACHE``."""
     import jax
 
     import sorjax
     from sorjax import _calibration as C
+    from sorjax import _homology as H
     from sorjax import scenes
 
     sc = scenes.random_sor_scene(seed, views)
     outlines = [v.outline for v in sc.views]
-    core, got = C._core, {}
+    core, fit, got = C._core, H._fit_core, {}
 
-    def capture(*args, **kwargs):  # the arguments calibrate passes, nothing run
-        got["args"], got["kwargs"] = args, kwargs
-        raise _Captured
+    def capture(name):
+        def f(*args, **kwargs):  # the arguments calibrate passes; the core is not run
+            got.setdefault(name, (args, kwargs))
+            if name == "core":
+                raise _Captured
+            return fit(*args, **kwargs)
+        return f
 
-    C._core = capture
+    C._core, H._fit_core = capture("core"), capture("fit")
     try:
         sorjax.calibrate(outlines, image_size=sc.image_size)
     except _Captured:
         pass
     finally:
-        C._core = core
-    t0 = time.perf_counter()
-    lowered = core.lower(*got["args"], **got["kwargs"])
-    t1 = time.perf_counter()
-    ops = stablehlo_ops(lowered.as_text())
-    t2 = time.perf_counter()
-    lowered.compile()
-    t3 = time.perf_counter()
+        C._core, H._fit_core = core, fit
+    out = dict(views=views, seed=seed, flags=os.environ.get("XLA_FLAGS", ""))
+    for name, program in (("fit", fit), ("core", core)):
+        jax.clear_caches()
+        args, kwargs = got[name]
+        t0 = time.perf_counter()
+        lowered = program.lower(*args, **kwargs)
+        t1 = time.perf_counter()
+        ops = stablehlo_ops(lowered.as_text())
+        t2 = time.perf_counter()
+        lowered.compile()
+        t3 = time.perf_counter()
+        out[name] = dict(ops=ops, lower_s=t1 - t0, compile_s=t3 - t2)
+    out["ops"], out["lower_s"], out["compile_s"] = (out["core"][k] for k in ("ops", "lower_s", "compile_s"))
+    out["solve_loops"] = solve_loops(got["core"][0][0])
     jax.clear_caches()  # the first call traces again, as a new process would
     t4 = time.perf_counter()
     cal = sorjax.calibrate(outlines, image_size=sc.image_size)
-    first = time.perf_counter() - t4
+    out["first_s"] = time.perf_counter() - t4
     warm = []
     for _ in range(runs):
         t = time.perf_counter()
         cal = sorjax.calibrate(outlines, image_size=sc.image_size)
         warm.append(time.perf_counter() - t)
-    f_err = abs(cal.fv / sc.K[1, 1] - 1) * 100
-    return dict(views=views, seed=seed, ops=ops, lower_s=t1 - t0, compile_s=t3 - t2, first_s=first,
-                warm_s=statistics.median(warm), f_err_pct=f_err, flags=os.environ.get("XLA_FLAGS", ""))
+    out["warm_s"] = statistics.median(warm)
+    out["f_err_pct"] = abs(cal.fv / sc.K[1, 1] - 1) * 100
+    return out
 
 
 FIRST_K_SCRIPT = r"""
@@ -793,8 +827,11 @@ def main(argv=None):
               f"{'warm' if a.warm_cache else 'fresh'} compilation cache, XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}",
               flush=True)
         r = calibrate_program(a.program_seed, a.program_views)
-        print(f"    bundle core (_core): {r['ops']:,} StableHLO operations (called functions inlined); trace + lower "
-              f"{r['lower_s']:.1f} s, XLA compile {r['compile_s']:.1f} s")
+        for name, what in (("fit", "per-view fit (_fit_core, one outline)"), ("core", "bundle core (_core)")):
+            print(f"    {what}: {r[name]['ops']:,} StableHLO operations (called functions inlined); trace + lower "
+                  f"{r[name]['lower_s']:.1f} s, XLA compile {r[name]['compile_s']:.1f} s")
+        print(f"    solve loops in the whole calibration (make_jaxpr of sorjax.core.calibrate): {r['solve_loops']} "
+              f"(target 2: {_mark(r['solve_loops'] == 2)})")
         print(f"    first calibrate (per-view fits compiled, the core from the cache): {r['first_s']:.1f} s; warm "
               f"{_ms(r['warm_s'])} a call (median of 8); focal error {r['f_err_pct']:.2g} %")
         print_first_k(a.timeout)
