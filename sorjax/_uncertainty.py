@@ -128,12 +128,17 @@ def predicted_error(
     K = np.asarray(scene.K)
     Kn = T @ K
     free = aspect_ratio is None
-    k0 = intrinsic_params(Kn, free)
+    # the padded chart (log fu, log fv, u0, v0) for both aspect models, so that they share
+    # one compiled program: with a known aspect ratio log fu is ignored (fu = a fv,
+    # :func:`sorjax.core._model.unpack_intrinsics`) and its zero column is dropped below,
+    # which leaves exactly the compact chart (log fv, u0, v0)
+    k0 = intrinsic_params(Kn, True)
     y0 = (k0, axis_params(np.stack([np.linalg.solve(T.T, np.asarray(v.l_s)) for v in scene.views])))
     aspect = jnp.asarray(np.nan if free else float(aspect_ratio))
+    cols = np.arange(len(k0) + 2 * V) >= (0 if free else 1)
 
     J, B = _jacobians(y0, jnp.asarray(pn), jnp.asarray(normals), weights, aspect, n_samples)
-    J, B = np.asarray(J), np.asarray(B).reshape(J.shape[0], V * M)
+    J, B = np.asarray(J)[:, cols], np.asarray(B).reshape(J.shape[0], V * M)
     keep = np.asarray(weights).reshape(-1) > 0
     J, B = J[keep], B[keep]
 
@@ -153,5 +158,5 @@ def predicted_error(
     w_inv = np.where(w > 1e-10 * w.max(), 1.0 / np.maximum(w, 1e-300), 0.0)
     C_gls = np.linalg.inv(J.T @ (U * w_inv) @ U.T @ J)
 
-    G = np.asarray(_intrinsics_jacobian(y0, jnp.asarray(T), aspect))
+    G = np.asarray(_intrinsics_jacobian(y0, jnp.asarray(T), aspect))[:, cols]
     return ErrorPrediction(jnp.asarray(G @ C_ols @ G.T), jnp.asarray(G @ C_gls @ G.T), float(K[1, 1]))
