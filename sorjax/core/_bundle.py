@@ -245,8 +245,8 @@ def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Opti
     a0 = axis_params(l)
     seed_ok = jnp.asarray(seed_ok, bool)
     ks = pack_seeds(seeds, seed_ok)
-    r0, feet0, _ = jax.vmap(lambda k: checked_residuals((k, a0), problem))(ks)  # feet0: each seed's hints
-    costs = jnp.sum(r0**2, axis=1)
+    r_seeds, feet0, _ = jax.vmap(lambda k: checked_residuals((k, a0), problem))(ks)  # feet0: each seed's hints
+    costs = jnp.sum(r_seeds**2, axis=1)
     costs = jnp.where(jnp.isfinite(costs), costs, jnp.inf)
     S = ks.shape[0]
     # the seeds to try first, by cost (ties: the first given); the others last

@@ -60,8 +60,8 @@ import jax.numpy as jnp
 from jax.scipy.special import gammaincc
 from jaxtyping import Array, Bool, Float, Int
 
-from ._covariance import (LIN_K, LIN_K1, LIN_VIEWS, Linearisation, floored_rss, lin_axis_columns, lin_vertex_columns,
-                          linearise, noise_blocks, project_out, residual_jacobian, residual_variance)
+from ._covariance import (Linearisation, chart_jacobian, floored_rss, lin_axis_columns, lin_vertex_columns, linearise,
+                          noise_blocks, project_out, residual_jacobian, residual_variance)
 from ._model import (BundleProblem, fixed_chart, free_intrinsics, make_problem, pin_intrinsics, pixel_params, with_model)
 from ._noise import noise_meat
 from ._options import Options
@@ -329,6 +329,12 @@ def release_score(y, problem: BundleProblem, release: Bool[Array, " nk"], T, opt
                    rejected=rejected, beyond=beyond)
 
 
+def _released(lin: Linearisation, held=None, k1: bool = False):
+    """:func:`release_score`'s ``jac`` read off the bundle's
+    :class:`~sorjax.core._covariance.Linearisation` (:func:`~sorjax.core._covariance.chart_jacobian`)."""
+    return chart_jacobian(lin, held, k1), lin.r, lin.feet, lin.a.reshape(-1)
+
+
 def lens_release(y, points_n, used, inliers, aspect, T, options: Options, fixed=None, base=None, *, ell,
                  lin: Linearisation | None = None) -> Release:
     """:func:`release_score` of the radial distortion ``k1`` that the pinhole bundle's
@@ -345,12 +351,7 @@ def lens_release(y, points_n, used, inliers, aspect, T, options: Options, fixed=
                else with_model(base, aspect, fixed_n))
     problem = dataclasses.replace(pinhole, n_dist=1)
     k = jnp.concatenate([y[0], jnp.zeros(1)])
-    jac = None
-    if lin is not None:
-        held = jnp.zeros(4, bool) if fixed_n is None else jnp.isfinite(fixed_n)
-        V = y[1].shape[0]
-        J = jnp.concatenate([jnp.where(held, 0.0, lin.J[:, LIN_K]), lin.J[:, LIN_K1:LIN_VIEWS + 2 * V]], axis=1)
-        jac = (J, lin.r, lin.feet, lin.a.reshape(-1))
+    jac = None if lin is None else _released(lin, None if fixed_n is None else jnp.isfinite(fixed_n), k1=True)
     return release_score((k, y[1]), problem, jnp.arange(5) == 4, T, options, ell, jac)
 
 
@@ -367,9 +368,5 @@ def fixed_release(y, points_n, used, inliers, aspect, T, options: Options, fixed
                else with_model(base, aspect))
     k = pin_intrinsics(y[0], chart)
     release = jnp.isfinite(chart) & free_intrinsics(aspect, None)
-    jac = None
-    if lin is not None:
-        V = y[1].shape[0]
-        J = jnp.concatenate([lin.J[:, LIN_K], lin.J[:, LIN_VIEWS:LIN_VIEWS + 2 * V]], axis=1)
-        jac = (J, lin.r, lin.feet, lin.a.reshape(-1))
+    jac = None if lin is None else _released(lin)
     return release_score((k, y[1]), problem, release, T, options, ell, jac)

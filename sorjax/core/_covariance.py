@@ -100,6 +100,16 @@ def lin_vertex_columns(V: int):
     return LIN_VIEWS + 2 * V + jnp.arange(2 * V).reshape(V, 2)
 
 
+def chart_jacobian(lin: Linearisation, held=None, k1: bool = False):
+    """The columns of ``lin.J`` in a bundle chart ``(k, [k1,] a)``: the intrinsic chart
+    (the entries ``held`` (4,) bool zeroed, as the chart that pins them has them; None:
+    none), ``k1`` when asked, then each view's ``(theta, rho)``; (V N, 4 [+ 1] + 2 V)."""
+    V = lin.a.shape[0]
+    Jk = lin.J[:, LIN_K] if held is None else jnp.where(held, 0.0, lin.J[:, LIN_K])
+    k1_col = [lin.J[:, LIN_K1:LIN_K1 + 1]] if k1 else []
+    return jnp.concatenate([Jk, *k1_col, lin.J[:, LIN_VIEWS:LIN_VIEWS + 2 * V]], axis=1)
+
+
 def _vertex_basis(v):
     """Two unit vectors orthogonal to ``v`` (3,) and to each other."""
     e = jnp.eye(3)[jnp.argmin(jnp.abs(v))]
@@ -203,9 +213,7 @@ def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Optio
     if lin is None:
         J, r, feet = residual_jacobian(y, problem, feet)
     else:
-        held = jnp.zeros(4, bool) if problem.fixed is None else jnp.isfinite(problem.fixed)
-        V = problem.weights.shape[0]
-        J = jnp.concatenate([jnp.where(held, 0.0, lin.J[:, LIN_K]), lin.J[:, LIN_VIEWS:LIN_VIEWS + 2 * V]], axis=1)
+        J = chart_jacobian(lin, None if problem.fixed is None else jnp.isfinite(problem.fixed))
         r, feet = lin.r, lin.feet
     s2 = residual_variance(r, y, problem)
     step = _step_length(J, r, s2)
