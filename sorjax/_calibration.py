@@ -7,6 +7,10 @@ the bundle -> verdicts, one compiled program of arrays), then the warnings and
 messages, written here from the core's arrays.  The views are padded to a few fixed
 counts (masked in the core), so that calibrations of 2, 3 or 4 views share one
 compiled program.
+
+The result (:mod:`sorjax._calibration_result`), the argument checks
+(:mod:`sorjax._calibration_checks`), the outlines' quality (:mod:`sorjax._calibration_quality`)
+and the thresholds (:mod:`sorjax._calibration_thresholds`) live in modules of their own.
 """
 
 from __future__ import annotations
@@ -18,305 +22,29 @@ from typing import Sequence
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, Int
 
-from ._checks import check_sizes
 from ._compile import one_off_jit
-from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
-from ._outline import BINARY_MASK_PX, DEFAULT_POINTS, PIXEL_TRACE_NOTE, _as_outlines, implied_outline_error, jagged_note
-from .core._assess import USED, outline_radius, view_verdicts
-from .core._checks import CULPRIT_VIEWS, ModelChecks
+from ._homology import DEFAULT_SAMPLES, fit_homology
+from ._outline import DEFAULT_POINTS, _as_outlines
 from .core._calibrate import _intrinsics, calibrate_homologies
 from .core._options import Options
 from .core._result import RESULTS
 from .core._viewfit import ViewHomologies
-from ._messages import (_NAMES, _code_item, _left_out_text, code_name, details_for, distortion_notes, dropped_views,
-                        model_notes, verdict_notes, view_notes)
-
-METHODS = ("bundle", "I", "IIa", "IIb")
-
-
-class CalibrationError(RuntimeError):
-    """Raised by ``calibrate(..., throw=True)`` when the calibration did not succeed."""
-
-
-class Calibration(eqx.Module):
-    """Estimated intrinsics of a zero-skew pinhole camera.
-
-    Attributes:
-        K: (3, 3) intrinsics in pixels (NaN entries when not successful).
-        omega: (3, 3) image of the absolute conic ``K^-T K^-1`` (pixels), as estimated.
-        homologies: the per-view :class:`Homology` fits (pixels).
-        result: a :class:`RESULTS` code; ``success`` is ``result == successful``.
-        covariance: (4, 4) covariance of ``(fu, fv, u0, v0)`` in px^2 (bundle only;
-            NaN for the linear methods, which give no uncertainty).
-        cost: eq. 20's cost summed over the views at the estimate, px^2 (bundle only).
-        view_rms: (V,) RMS symmetry residual of each view, px: under the joint model
-            for the bundle, of the free per-view fit for the linear methods.
-        steps: optimiser steps (bundle; 0 for the linear methods).
-        v_x: (V, 3) the vertices used: jointly estimated for the bundle, the per-view
-            fits' for the linear methods (pixels, unit norm).
-        l_s: (V, 3) the axes: ``omega v_x`` for the bundle, the per-view fits' for the
-            linear methods (pixels, ``a^2 + b^2 = 1``).
-        method: "I", "IIa", "IIb" or "bundle".
-        aspect_ratio: the known ``fu / fv`` imposed, or None when it was estimated
-            (always 1 for "I"/"IIb" without one).
-        used: indices of the views used (conic outlines and outlines that are not
-            symmetric are dropped with a warning); ``view_rms``, ``v_x`` and ``l_s``
-            refer to these views, ``homologies`` to all.
-        details: what is specific to this result (empty on plain success): which
-            views were dropped, which intrinsics are or are not determined, what to add.
-        dropped: ``(view index, reason)`` for each view left out.
-        notes: every warning :func:`calibrate` issued for this calibration, in order.
-        perspective_px: the evidence for perspective in the outlines (bundle only): how
-            much worse, in px RMS per sample, the best camera with no perspective
-            (orthographic, every v_x at infinity) fits them than the bundle's estimate
-            (NaN for the linear methods, which give no uncertainty either).  Only
-            perspective fixes the focal length; see ``outline_error`` in :func:`calibrate`.
-        perspective_z: the same evidence in units of the symmetry noise,
-            ``sqrt(delta cost / s^2)`` (a z-score against "no perspective").
-        outline_error: the outline error allowed for (px): the declared one, or more
-            when the coordinates show it (whole-pixel or mask-staircase outlines), or
-            the one measured from the outlines (``calibrate(outline_error="measured")``;
-            a note says which).
-        distortion_model: "none", "k1" or "k1k2" (``calibrate(distortion=...)``).
-        distortion: OpenCV's radial coefficients ``(k1,)`` or ``(k1, k2)`` (camera-
-            normalised coordinates, as ``cv2.undistort`` takes them); NaN when the
-            outlines did not determine them; None for a pinhole.  ``distortion_std``:
-            their standard deviations.
-        checks: the model checks' statistics (:class:`sorjax.core.ModelChecks`): a
-            known aspect ratio against the free fit, the views' consistency with one
-            camera, duplicated views.  ``RESULTS.inconsistent`` when the outlines
-            contradict the model; the standard deviations widened (and a warning) when
-            the model is only not confirmed.
-        fixed_principal_point, fixed_focal_length: the intrinsics held fixed
-            (``calibrate(principal_point=..., focal_length=...)``; px), None when
-            estimated.  Their standard deviations are 0.
-    """
-
-    K: Float[Array, "3 3"]
-    omega: Float[Array, "3 3"]
-    homologies: tuple[Homology, ...]
-    result: RESULTS
-    covariance: Float[Array, "4 4"]
-    cost: Float[Array, ""]
-    view_rms: Float[Array, " V"]
-    steps: Int[Array, ""]
-    v_x: Float[Array, "V 3"]
-    l_s: Float[Array, "V 3"]
-    method: str = eqx.field(static=True)
-    aspect_ratio: float | None = eqx.field(static=True, default=None)
-    used: tuple[int, ...] = eqx.field(static=True, default=())
-    details: str = eqx.field(static=True, default="")
-    dropped: tuple[tuple[int, str], ...] = eqx.field(static=True, default=())
-    notes: tuple[str, ...] = eqx.field(static=True, default=())
-    perspective_px: float = eqx.field(static=True, default=math.nan)
-    perspective_z: float = eqx.field(static=True, default=math.nan)
-    outline_error: float = eqx.field(static=True, default=math.nan)
-    checks: ModelChecks | None = None
-    distortion_model: str = eqx.field(static=True, default="none")
-    distortion: Float[Array, " n"] | None = None
-    distortion_std: Float[Array, " n"] | None = None
-    fixed_principal_point: tuple[float, float] | None = eqx.field(static=True, default=None)
-    fixed_focal_length: float | None = eqx.field(static=True, default=None)
-
-    @property
-    def std(self) -> np.ndarray:
-        """Standard deviations of ``(fu, fv, u0, v0)`` in px (NaN when unknown)."""
-        return np.sqrt(np.diag(np.asarray(self.covariance)))
-
-    @property
-    def fu(self) -> float:
-        return float(np.asarray(self.K)[0, 0])
-
-    @property
-    def fv(self) -> float:
-        return float(np.asarray(self.K)[1, 1])
-
-    @property
-    def u0(self) -> float:
-        return float(np.asarray(self.K)[0, 2])
-
-    @property
-    def v0(self) -> float:
-        return float(np.asarray(self.K)[1, 2])
-
-    @property
-    def principal_point(self) -> np.ndarray:
-        """``(u0, v0)`` in pixels (also when only the principal point is determined)."""
-        return np.array([self.u0, self.v0])
-
-    @property
-    def success(self) -> bool:
-        return bool(self.result == RESULTS.successful)
-
-    @property
-    def message(self) -> str:
-        text = RESULTS[self.result]
-        return f"{text} {self.details}".strip() if self.details else text
-
-    def __array__(self, dtype=None, copy=None):
-        return np.asarray(self.K, dtype=dtype)
-
-
-def _is_number(x) -> bool:
-    return not isinstance(x, (bool, np.bool_)) and isinstance(x, (int, float, np.integer, np.floating))
-
-
-def _check_fixed(principal_point, focal_length, image_size, method: str):
-    """``(pp, f)``: the fixed principal point ``(cx, cy)`` px (or None) and focal
-    length px (or None), validated (``image_size`` already checked: ``(w, h)`` or
-    None)."""
-    pp = None
-    if principal_point is not None:
-        if isinstance(principal_point, str):
-            if principal_point not in ("centre", "center"):
-                raise ValueError(f"principal_point must be (cx, cy) in pixels or 'centre' (the command line's "
-                                 f"--principal-point CX CY or --centre-principal-point); got {principal_point!r}.")
-            if image_size is None:
-                raise ValueError("principal_point='centre' needs image_size=(width, height) (the command line "
-                                 "reads it from the images; with outline files give --principal-point CX CY).")
-            pp = ((image_size[0] - 1) / 2.0, (image_size[1] - 1) / 2.0)
-        else:
-            try:
-                xs = tuple(principal_point)
-            except TypeError:
-                xs = ()
-            if len(xs) != 2 or not all(_is_number(x) and math.isfinite(x) for x in xs):
-                raise ValueError(f"principal_point must be (cx, cy), two finite numbers of pixels, or 'centre' (the "
-                                 f"command line's --principal-point CX CY or --centre-principal-point); got "
-                                 f"{principal_point!r}.")
-            pp = (float(xs[0]), float(xs[1]))
-            if max(abs(pp[0]), abs(pp[1])) > 1e7:
-                raise ValueError(f"principal_point {pp!r} is beyond 1e7 px (outlines are limited to that).")
-    f = None
-    if focal_length is not None:
-        if not _is_number(focal_length) or not (math.isfinite(focal_length) and 0 < focal_length <= 1e9):
-            raise ValueError(f"focal_length must be a positive finite number of pixels (fv; the command line's "
-                             f"--focal F); got {focal_length!r}.")
-        f = float(focal_length)
-    if (pp is not None or f is not None) and method != "bundle":
-        which = "principal_point" if pp is not None else "focal_length"
-        raise ValueError(f"{which} is held fixed by the bundle only; use method='bundle' (the default) instead of "
-                         f"{method!r} (the command line's --method).")
-    return pp, f
-
-
-def _check_method(method: str, aspect_ratio):
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(map(repr, METHODS))}; got {method!r}.")
-    if aspect_ratio is not None:
-        if isinstance(aspect_ratio, (bool, np.bool_)) or not isinstance(
-            aspect_ratio, (int, float, np.floating, np.integer)
-        ) or not (math.isfinite(aspect_ratio) and aspect_ratio > 0):
-            raise ValueError(f"aspect_ratio must be a positive finite number (fu / fv); got {aspect_ratio!r}.")
-        if method == "IIa":
-            raise ValueError(
-                "method 'IIa' estimates the aspect ratio itself; to impose a known aspect "
-                "ratio use method='IIb' (or 'I') with aspect_ratio=..."
-            )
-
-
-# ------------------------------------------------------------ degenerate geometry
-
-# A view is dropped as "not a surface of revolution" when its per-view symmetry
-# residual (eq. 20, RMS) exceeds ASYMMETRY_PX *and* ASYMMETRY_REL of the outline's
-# RMS radius.  Measured (experiments/degenerate.py, 24 views of random SORs): exact
-# outlines fit to < 4e-5 px; with the paper's noise of sigma = 2 px the residual stays
-# below 0.7 px, with i.i.d. Gaussian noise of 2 px below 1.4 px (1.8 px in a wider
-# probe); smooth random blobs gave 2.6 px (median; 75 % above 2 px) for a radius
-# modulation of 20 %, 4.8 px (all above 2 px) for 35 %.  So only clearly asymmetric
-# outlines are caught: a mild asymmetry is indistinguishable from noise by this
-# residual.  Between WARN_ASYMMETRY_PX and the
-# threshold the view is kept with a warning.
-_O = Options()  # the defaults; the values live in sorjax.core.Options
-ASYMMETRY_PX = _O.asymmetry_px
-ASYMMETRY_REL = _O.asymmetry_rel
-WARN_ASYMMETRY_PX = _O.warn_asymmetry_px
-# The robust per-view fit trims samples with no mirror image (a handle, a shadow); a
-# view that needs more than MAX_TRIMMED of its samples trimmed is not a surface of
-# revolution, and from NOTE_TRIMMED on the trimming is reported.  Measured: a smooth
-# 8 px handle over 12 % of a vase's outline trims 14 % (the handle and its mirror
-# image); GrabCut outlines of ycb-video cans that leaked into the background trimmed
-# 15-22 % and, kept, gave a confident wrong K: hence 20 %, and the symmetry test on the
-# untrimmed residual.
-MAX_TRIMMED = _O.max_trimmed
-NOTE_TRIMMED = _O.note_trimmed
-# An intrinsic is "not determined" when its standard deviation (the covariance at the
-# estimate, scaled by the residual -- at least RESIDUAL_FLOOR_PX when every v_x is at
-# infinity) is infinite or above UNDETERMINED times the focal length (for the
-# principal point: times the outlines' RMS radius when the focal length itself is not
-# determined): a 3-sigma interval reaching zero.  A focal length from one view: above
-# FOCAL_UNDETERMINED times itself (the 3-sigma interval of 1 / f^2 reaching zero).
-UNDETERMINED = _O.undetermined
-FOCAL_UNDETERMINED = _O.focal_undetermined
-# A focal length below MIN_FOCAL_FRACTION of the extent of the outlines (their
-# bounding box's larger side, px) would put them across more than 90 degrees of view,
-# where a lens without distortion (sorjax's model) is implausible: a collapsed
-# estimate, never "determined" -- nor is the principal point estimated with it.  Seen
-# on real photographs with weak perspective and imperfect outlines: f fell to 1..25 px,
-# and to 168 px (nocs-real275, true 590) and 177 px (ycb-video, true 1067) with a std
-# of 13-15 px and the principal point 7 to 20 std off.
-MIN_FOCAL_FRACTION = _O.min_focal_fraction
-# With the image size known (``calibrate(image_size=...)``), an estimate is also
-# implausible when it gives the image a field of view above MAX_FOV_DEG across (wider
-# lenses are fisheyes, far from a pinhole without distortion) or puts the principal
-# point outside the image.  (ycb-video, true f 1067 px: f 177 +- 13 px, a 122 deg view
-# of its 640 px width -- caught only by this bound, narrowly.)
-MAX_FOV_DEG = _O.max_fov_deg
-# Weak geometry: warn when the relative standard deviation of a focal length exceeds
-# WEAK_REL_STD, the covariance scaled by the residual but at least RESIDUAL_FLOOR_PX
-# (about the accuracy of good sub-pixel outlines), so that a configuration that only
-# noise-free outlines could calibrate is flagged too.
-WEAK_REL_STD = _O.weak_rel_std
-RESIDUAL_FLOOR_PX = _O.residual_floor_px
-# Perspective evidence (bundle).  Only perspective fixes the focal length, and under
-# weak perspective an outline shows very little of it (a 5 % focal error changes the
-# symmetry of typical outlines by about 0.25 px).  Systematic errors of the outlines
-# (segmentation bias, lens distortion, an object that is not quite a surface of
-# revolution) hide from the symmetry residual but can fake or cancel that much, and the
-# bundle's covariance, a linearisation at its own estimate, can then be confident far
-# from the truth.  So the focal length counts as determined only when the best camera
-# with no perspective (:func:`sorjax.core._bundle.orthographic_cost`) fits the outlines worse
-# by a cost delta with sqrt(delta / s^2) >= PERSPECTIVE_Z (the noise cannot explain it)
-# and sqrt(delta / n) >= PERSPECTIVE_FACTOR * outline_error px (nor can a systematic
-# error of the outlines of `outline_error` px RMS: a fully aligned one changes the cost
-# by n outline_error^2).  Measured: the real photographs of nvlabs-6dof-graspnet
-# (experiments/realdata.py; approximate masks) show 0.20 to 0.22 px of perspective and
-# gave f 271 +- 16 px for a true 616 without this gate; the two-sphere scene shows 0.7
-# to 0.8 px at f = 700 and 0.14 to 0.28 px at f = 1400 (1 to 2 px of noise); rendered
-# objects near the image centre at f = 1250 to 1500 px 0.23 to 0.24 px.
-OUTLINE_ERROR_PX = _O.outline_error_px
-PERSPECTIVE_Z = _O.perspective_z
-PERSPECTIVE_FACTOR = _O.perspective_factor
-def _check_homologies(homologies, n_views):
-    if homologies is not None:
-        try:
-            homologies = tuple(homologies)
-        except TypeError:
-            raise ValueError(
-                f"homologies must be a sequence of sorjax.Homology (one per outline, from "
-                f"sorjax.fit_homology); got {type(homologies).__name__}."
-            ) from None
-        if len(homologies) != n_views:
-            raise ValueError(
-                f"got {len(homologies)} homologies for {n_views} outlines; pass one "
-                "sorjax.fit_homology result per outline, in the same order (or none)."
-            )
-        for i, h in enumerate(homologies):
-            if not isinstance(h, Homology):
-                raise ValueError(
-                    f"homologies[{i}] is a {type(h).__name__}, not a sorjax.Homology; "
-                    "pass the results of sorjax.fit_homology (or homologies=None)."
-                )
-    return homologies
-
-
-
-
-_check_sizes = check_sizes  # n_samples, n_points: the same rules as fit_homology's (sorjax._checks)
+from ._messages import (_NAMES, _left_out_text, code_name, details_for, distortion_notes, dropped_views, model_notes,
+                        verdict_notes, view_notes)
+from ._calibration_checks import (METHODS as METHODS, _check_arguments, _check_homologies, _check_views,
+                                  _outline_noise)
+from ._calibration_quality import (_grid_floor, _own_errors, dominant_view as dominant_view,
+                                   measured_outline_error as measured_outline_error)
+from ._calibration_result import Calibration as Calibration, CalibrationError as CalibrationError, _calibration
+from ._calibration_thresholds import (ASYMMETRY_PX as ASYMMETRY_PX, ASYMMETRY_REL as ASYMMETRY_REL,
+                                      FOCAL_UNDETERMINED as FOCAL_UNDETERMINED, MAX_FOV_DEG as MAX_FOV_DEG,
+                                      MAX_TRIMMED as MAX_TRIMMED, MIN_FOCAL_FRACTION as MIN_FOCAL_FRACTION,
+                                      NOTE_TRIMMED as NOTE_TRIMMED, OUTLINE_ERROR_PX as OUTLINE_ERROR_PX,
+                                      PERSPECTIVE_FACTOR as PERSPECTIVE_FACTOR, PERSPECTIVE_Z as PERSPECTIVE_Z,
+                                      RESIDUAL_FLOOR_PX as RESIDUAL_FLOOR_PX, UNDETERMINED as UNDETERMINED,
+                                      WARN_ASYMMETRY_PX as WARN_ASYMMETRY_PX, WEAK_REL_STD as WEAK_REL_STD)
 
 
 # ------------------------------------------------------------------ the core call
@@ -484,122 +212,6 @@ def jackknife(r, points: np.ndarray, homs: ViewHomologies, method: str, aspect, 
         r = eqx.tree_at(lambda x: (x.K, x.omega, x.result), r, (K, np.full((3, 3), np.nan), RESULTS.degenerate))
     r = eqx.tree_at(lambda x: (x.covariance, x.std, x.determined), r, (cov, std, new))
     return r, notes
-
-
-def dominant_view(r, options: Options) -> tuple[int, float] | None:
-    """``(view, share)`` of a result ``r`` (numpy) that the consistency check refused
-    (``inconsistent``, the views to blame) when one view holds at least
-    ``options.measured_leave_share`` of the score statistic ``S = sum_j S_j``
-    (:func:`sorjax.core._checks.view_scores`) and at least 3 used views would remain;
-    else None."""
-    ch = r.checks
-    if code_name(r.result) != "inconsistent" or int(ch.culprit) != CULPRIT_VIEWS:
-        return None
-    used = np.asarray(r.used, bool)
-    S = np.where(used, np.nan_to_num(np.asarray(ch.view_score, np.float64), nan=0.0), 0.0)
-    total = float(S.sum())
-    if used.sum() < 4 or not total > 0:
-        return None
-    j = int(np.argmax(S))
-    share = float(S[j]) / total
-    return (j, share) if share >= float(options.measured_leave_share) else None
-
-
-def _check_outline_error(outline_error):
-    """``(declared px, per-outline errors (px) or None, measured?)`` from
-    :func:`calibrate`'s ``outline_error``: a number, "measured" or one number per outline."""
-    bad = ("outline_error must be a finite number of pixels >= 0, 'measured' (taken from the outlines' symmetry "
-           f"residuals), or one such number per outline (NaN: no estimate); got {outline_error!r:.80}.")
-
-    def px(x, nan_ok=False):
-        if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating)) or not (
-                (math.isfinite(x) and x >= 0) or (nan_ok and math.isnan(x))):
-            raise ValueError(bad)
-        return float(x)
-
-    if isinstance(outline_error, str):
-        if outline_error != "measured":
-            raise ValueError(bad)
-        return OUTLINE_ERROR_PX, None, True
-    if isinstance(outline_error, (list, tuple, np.ndarray)):
-        try:
-            vals = np.asarray(outline_error).tolist() if np.ndim(outline_error) == 1 else None
-        except ValueError:  # ragged
-            vals = None
-        if not vals:
-            raise ValueError(bad)
-        return OUTLINE_ERROR_PX, np.array([px(x, nan_ok=True) for x in vals]), True
-    return px(outline_error), None, False
-
-
-def _outline_noise(outline_noise, outlines, n: int, name: str = "outline_noise", attr: str = "noise_rms"):
-    """:func:`calibrate`'s ``outline_noise`` (or ``outline_noise_ell``: ``name``, read
-    from the attribute ``attr``) as (n,) px (0: none), or None (none): given, or the
-    outlines' own attributes."""
-    if outline_noise is None:
-        own = [getattr(o, attr, None) for o in outlines] if isinstance(outlines, (list, tuple)) else []
-        own = [float(e) if _is_number(e) and math.isfinite(e) and e > 0 else 0.0 for e in own]
-        return np.array(own) if len(own) == n and any(own) else None
-    bad = (f"{name} must be a finite number of pixels >= 0, one such number per outline (NaN: none), or "
-           f"None; got {outline_noise!r:.80}.")
-    vals = np.atleast_1d(np.asarray(outline_noise, dtype=object))
-    if vals.ndim != 1 or not all(_is_number(v) and (math.isnan(v) or (math.isfinite(v) and v >= 0)) for v in vals):
-        raise ValueError(bad)
-    vals = np.nan_to_num(vals.astype(np.float64), nan=0.0)
-    if np.ndim(outline_noise) == 0:
-        return np.full(n, vals[0])
-    if vals.size != n:
-        raise ValueError(f"{name}: got {vals.size} values for {n} outlines; give one number (px) per outline, "
-                         "in the same order, or one number for all.")
-    return vals
-
-
-def _own_errors(outlines):
-    """The outlines' own error estimates (px; NaN: none): the ``outline_error``
-    attribute an extractor attaches to its outline arrays (sorjax's image path does),
-    or None when no outline has one."""
-    own = []
-    for o in outlines:
-        e = getattr(o, "outline_error", None)
-        own.append(float(e) if _is_number(e) and (math.isnan(e) or (math.isfinite(e) and e >= 0)) else math.nan)
-    return np.array(own) if np.isfinite(own).any() else None
-
-
-def measured_outline_error(homs: ViewHomologies, points, per_outline=None, *, floor: float = OUTLINE_ERROR_PX,
-                           options: Options = Options(), left_out: Sequence[int] = (),
-                           noise=None) -> tuple[float, str]:
-    """The outline error (px) measured from the outlines, and a note saying so.
-
-    Each view's error is its symmetry residual, the RMS residual of its homology fit
-    (eq. 20, px; ``homs.rms``), or the outline's own error estimate ``per_outline[i]``
-    (px, e.g. an extractor's; NaN: none) or its noise floor ``noise[i]`` (px, the residual
-    it would show, :func:`calibrate`'s ``outline_noise``) when larger; the measured error is their RMS
-    over the views the calibration keeps (:func:`sorjax.core._assess.view_verdicts`: not a
-    conic, not asymmetric, not over-trimmed, not in ``left_out``), and at least ``floor``.  A residual
-    shows only the outline errors that break the symmetry; a segmentation that leaks
-    or shrinks has errors that keep it as well, of about the same size, which the
-    perspective gate must allow for: outlines 1 to 2 px from symmetric with the
-    default 0.1 px gave a confident wrong K (issue 17: fu 809 +- 29 px for a true 980)."""
-    pts = jnp.asarray(points)
-    valid = np.ones(pts.shape[0], bool)
-    valid[list(left_out)] = False
-    keep = np.asarray(view_verdicts(jnp.asarray(homs.rms), jnp.asarray(homs.rms_untrimmed), outline_radius(pts),
-                                    jnp.asarray(homs.is_conic), jnp.asarray(homs.trimmed),
-                                    jnp.asarray(valid), options)) == USED
-    rms = np.asarray(homs.rms, np.float64)
-    if noise is not None:  # an averaged outline: the residual it would show
-        rms = np.fmax(rms, np.asarray(noise, np.float64))
-    err = rms if per_outline is None else np.fmax(rms, np.asarray(per_outline, np.float64))
-    ok = keep & np.isfinite(err)
-    value = float(np.sqrt(np.mean(err[ok] ** 2))) if ok.any() else 0.0
-    src = "symmetry residuals" if per_outline is None else "symmetry residuals and own error estimates"
-    spread = f"{err[ok].min():.2g} to {err[ok].max():.2g} px" if ok.sum() > 1 else (
-        f"{err[ok][0]:.2g} px" if ok.any() else "no view kept")
-    used = max(value, floor)
-    return used, (f"outline error {used:.2g} px, measured from the outlines: the RMS of the {int(ok.sum())} kept "
-                  f"views' {src} ({spread}: {value:.2g} px)" + (f", at least {floor:g} px" if floor > value else "")
-                  + f"; the focal length counts as determined only when the outlines show >= "
-                  f"{options.perspective_factor * used:.2g} px of perspective.")
 
 
 def calibrate(
@@ -795,87 +407,6 @@ def calibrate(
     return cal
 
 
-def _check_arguments(method, aspect_ratio, distortion, n_samples, n_points, outline_error, image_size,
-                     principal_point, focal_length):
-    """:func:`calibrate`'s arguments checked before any outline is read: ``(outline_error
-    px, per-outline errors or None, measured?, image_size, principal point fixed, focal
-    length fixed)``; a ValueError that says what is wrong otherwise."""
-    _check_method(method, aspect_ratio)
-    if not isinstance(distortion, str) or distortion not in ("none", "k1", "k1k2"):
-        raise ValueError(f"distortion must be 'none', 'k1' or 'k1k2' (OpenCV's radial terms); got {distortion!r}.")
-    if distortion != "none" and method != "bundle":
-        raise ValueError(f"distortion={distortion!r} is estimated by the bundle only; use method='bundle' (the "
-                         f"default) instead of {method!r}.")
-    _check_sizes(n_samples, n_points)
-    outline_error, per_outline, measure = _check_outline_error(outline_error)
-    if image_size is not None:
-        try:
-            iw, ih = (int(x) for x in image_size)
-            if iw <= 0 or ih <= 0 or (iw, ih) != tuple(image_size) or any(isinstance(x, (bool, np.bool_))
-                                                                            for x in image_size):
-                raise ValueError
-        except (TypeError, ValueError):
-            raise ValueError(f"image_size must be (width, height) in pixels, two positive integers; got "
-                             f"{image_size!r}.") from None
-        image_size = (iw, ih)
-    pp_fixed, f_fixed = _check_fixed(principal_point, focal_length, image_size, method)
-    return outline_error, per_outline, measure, image_size, pp_fixed, f_fixed
-
-
-def _check_views(n: int, per_outline, pp_fixed, f_fixed, aspect_ratio):
-    """The number of outlines ``n`` checked against what the calibration needs (a
-    ValueError that says what to add); returns the aspect ratio to impose (1 for one
-    view with a fixed principal point, or a fixed focal length, unless given)."""
-    if per_outline is not None and len(per_outline) != n:
-        raise ValueError(f"outline_error: got {len(per_outline)} per-outline errors for {n} outlines; give one "
-                         "number (px) per outline, in the same order, or one number for all, or 'measured'.")
-    if n == 1 and pp_fixed is not None:
-        aspect_ratio = 1.0 if aspect_ratio is None else aspect_ratio  # the single-view case: square pixels
-    if f_fixed is not None and aspect_ratio is None:
-        aspect_ratio = 1.0  # a fixed focal length fixes fu = aspect fv: square pixels unless told
-    if n < (1 if pp_fixed is not None else 2):
-        raise ValueError(
-            f"calibration needs at least two outlines (views) of surfaces of revolution; got "
-            f"{n}. One outline gives only its own axis l_s and vanishing point v_x "
-            "(use sorjax.fit_homology): two constraints on the four intrinsics (fu, fv, u0, v0), "
-            "which leaves the camera undetermined. Add an outline from another view (the object "
-            "moved or tilted, or another object), or fix the principal point (principal_point=(cx, cy) or "
-            "'centre'; the command line's --principal-point CX CY or --centre-principal-point): one view then "
-            "gives the focal length."
-        )
-    return aspect_ratio
-
-
-def _grid_floor(raw, smoothed, outline_error: float, measure: bool) -> tuple[float, list[str]]:
-    """The outline error raised to what outlines on a pixel grid carry at least (their
-    quantisation, a mask's staircase, a pixel trace: :func:`implied_outline_error`;
-    ``smoothed``: per outline, what :func:`sorjax._outline._as_outlines` smoothed away),
-    and the notes that say so: ``(outline_error px, notes)``."""
-    implied = [implied_outline_error(o) for o in raw] or [(0.0, "")]
-    floor_px, floor_kind = max(implied, key=lambda t: t[0])
-    traces = [i for i, t in enumerate(implied) if t[1] == "pixel trace"]
-    notes = [f"outline{'s' if len(traces) > 1 else ''} {', '.join(map(str, traces))}: {PIXEL_TRACE_NOTE}"
-             ] if traces else []
-    jagged = [(i, j) for i, j in enumerate(smoothed) if j]
-    if jagged:
-        jit = [j[0] for _, j in jagged]
-        notes.append(f"outline{'s' if len(jagged) > 1 else ''} {', '.join(str(i) for i, _ in jagged)}: "
-                     + jagged_note(min(jit), max(j[1] for _, j in jagged), max(jit)))
-    if floor_px > outline_error:
-        which = [i for i, t in enumerate(implied) if t[0] == floor_px]
-        why = {"staircase": "an unsmoothed staircase along or between pixels (up to half a pixel off the edge)",
-               "pixel trace": "a binary mask's boundary pixels (its outline is as accurate as a binary mask's, "
-                              f"about {BINARY_MASK_PX:g} px)",
-               }.get(floor_kind, "rounded to whole or half pixels (1/sqrt(12) px of rounding error per coordinate)")
-        notes.append(
-            f"outline{'s' if len(which) > 1 else ''} {', '.join(map(str, which))}: the coordinates are {why}; "
-            f"the outline error is taken as {floor_px:.2g} px instead of the {'default' if measure else 'declared'} "
-            f"{outline_error:g} px. Sub-pixel outlines (sorjax.outlines_from_mask on a soft mask, or the 0.5 "
-            "level of a blurred mask) are more accurate.")
-        outline_error = floor_px
-    return outline_error, notes
-
-
 def _measured(run, per_outline, floor_px: float, n_samples: int):
     """The calibration of outlines of measured quality (``outline_error="measured"``):
     the outline error measured (:func:`measured_outline_error`, at least ``floor_px``),
@@ -913,18 +444,3 @@ def _measured(run, per_outline, floor_px: float, n_samples: int):
                                   left_out=list(left_out), noise=kw["noise"], noise_ell=kw["noise_ell"])
         notes += jack_notes
     return r, outline_error, left_out, notes
-
-
-def _calibration(r, homologies, method: str, a, details, left_out, notes, outline_error, distortion: str, pp_fixed,
-                 f_fixed, dropped) -> Calibration:
-    """The :class:`Calibration` of the core's result ``r`` (numpy) and its texts."""
-    n = {"none": 0, "k1": 1, "k1k2": 2}[distortion]
-    return Calibration(
-        jnp.asarray(r.K), jnp.asarray(r.omega), homologies, _code_item(r.result), jnp.asarray(r.covariance),
-        jnp.asarray(r.cost), jnp.asarray(r.view_rms[r.used]), jnp.asarray(r.steps), jnp.asarray(r.v_x[r.used]),
-        jnp.asarray(r.l_s[r.used]), method, a, tuple(int(i) for i in np.flatnonzero(r.used)), details,
-        tuple((i, left_out.get(i, why)) for i, why in dropped), tuple(notes), float(r.perspective_px),
-        float(r.perspective_z), float(outline_error), jax.tree_util.tree_map(jnp.asarray, r.checks), distortion,
-        None if n == 0 else jnp.asarray(r.distortion[:n]), None if n == 0 else jnp.asarray(r.distortion_std[:n]),
-        pp_fixed, f_fixed,
-    )
