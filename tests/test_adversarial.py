@@ -25,6 +25,7 @@ from hypothesis import strategies as st
 import sorjax
 from sorjax import _extract as E
 from sorjax import _masks as M
+from sorjax import _unmixing as U
 from sorjax import scenes
 from sorjax._files import atomic_folder, atomic_path, check_output, safe_name, write_text
 from sorjax.cli import main
@@ -362,13 +363,13 @@ def test_image_windows_and_tiles_equal_the_whole_image():
     for o in r.objects:
         fg |= o.coverage >= 0.5
     img = src.f64(0, H, 0, W)
-    old_tile = E._TILE
+    old_tile = U._TILE
     try:
-        E._TILE = 96  # many tiles on a small image
+        U._TILE = 96  # many tiles on a small image
         tiled = E._soft_alpha_tiled(lambda *w: src.f64(*w), fg, inner=1.5)
         sharp = E._edge_sharpness(lambda *w: src.f64(*w), fg)
     finally:
-        E._TILE = old_tile
+        U._TILE = old_tile
     np.testing.assert_array_equal(tiled, E._soft_alpha(img, fg, inner=1.5))
     assert sharp == E._edge_sharpness(img, fg)
     # the automatic start: the old whole-image construction against the window's
