@@ -15,6 +15,7 @@ from ._homology import Homology, fit_homology, homology_matrix  # noqa: E402
 from ._outline import Outline, make_outline  # noqa: E402
 from ._outline_files import load_outlines, save_outlines  # noqa: E402
 from ._uncertainty import ErrorPrediction, predicted_error  # noqa: E402
+from .core._options import Options  # noqa: E402
 from . import losses, render, scenes  # noqa: E402
 
 __all__ = [
@@ -23,6 +24,7 @@ __all__ = [
     "CalibrationError",
     "ErrorPrediction",
     "Homology",
+    "Options",
     "Outline",
     "calibrate",
     "fit_homology",

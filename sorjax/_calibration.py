@@ -15,6 +15,7 @@ and the thresholds (:mod:`sorjax._calibration_thresholds`) live in modules of th
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import warnings
@@ -56,10 +57,14 @@ def _bucket(n: int) -> int:
     return max(4, 1 << (n - 1).bit_length())
 
 
-def view_homologies(homologies, n_samples: int) -> ViewHomologies:
+def view_homologies(homologies, n_samples: int, options: Options | None = None) -> ViewHomologies:
     """Stack :class:`Homology` fits (numpy) into the core's :class:`ViewHomologies`;
     hand-built ones (no robust-fit fields) count as untrimmed, finite vertex unless
-    ``|v_x[2]| < 1e-9``."""
+    ``|v_x[2]| < 1e-9``.  Whether a vertex is at infinity and whether an outline is a
+    conic are judged by ``options`` (None: the defaults; as
+    :attr:`Homology.v_x_at_infinity` and :attr:`Homology.is_conic` do)."""
+    o = Options() if options is None else options
+
     def row(h):
         inl = None if h.inliers is None else np.asarray(h.inliers, bool)
         if inl is None or inl.shape != (n_samples,):
@@ -71,7 +76,9 @@ def view_homologies(homologies, n_samples: int) -> ViewHomologies:
             rms_untrimmed=np.float64(rms if h.rms_untrimmed is None else float(h.rms_untrimmed)),
             conic_rms=np.float64(float(h.conic_rms)), trimmed=np.float64(h.trimmed),
             infinity_z=np.float64(np.inf if h.infinity_z is None else float(h.infinity_z)),
-            at_infinity=np.bool_(h.v_x_at_infinity), is_conic=np.bool_(h.is_conic),
+            at_infinity=np.bool_(abs(float(v[2])) < 1e-9 or (h.infinity_z is not None
+                                                             and float(h.infinity_z) < o.infinity_z)),
+            is_conic=np.bool_(float(h.conic_rms) <= o.conic_ratio * rms + o.conic_floor_px),
             converged=np.bool_(bool(h.converged)), steps=np.int32(int(h.steps)), inliers=inl,
             noise_ell=np.float64(np.nan if h.noise_ell is None else float(h.noise_ell)),
         )
@@ -219,10 +226,10 @@ def calibrate(
     method: str = "bundle",
     aspect_ratio: float | None = None,
     *,
-    n_samples: int = DEFAULT_SAMPLES,
+    n_samples: int | None = None,
     n_points: int = DEFAULT_POINTS,
     homologies=None,
-    outline_error: float | str | Sequence[float] = OUTLINE_ERROR_PX,
+    outline_error: float | str | Sequence[float] | None = None,
     image_size: tuple[int, int] | None = None,
     distortion: str = "none",
     principal_point=None,
@@ -230,6 +237,7 @@ def calibrate(
     outline_noise: float | Sequence[float] | None = None,
     outline_noise_ell: float | Sequence[float] | None = None,
     throw: bool = False,
+    options: Options | None = None,
 ) -> Calibration:
     """Calibrate a camera from the outlines of surfaces of revolution.
 
@@ -242,11 +250,13 @@ def calibrate(
             ratio; eqs. 27-28) or "IIb" (IIa with ``fu = a fv``).
         aspect_ratio: known ``fu / fv``.  "I" and "IIb" assume 1 when it is None;
             "bundle" then estimates it (free aspect).
-        n_samples: samples per outline in the homology fit (eq. 20).
+        n_samples: samples per outline in the homology fit (eq. 20); None:
+            ``options.n_samples`` (100, the paper's N, by default).
         n_points: resampled outline size for the distance fields.
         homologies: optional precomputed per-view :class:`Homology` fits.
         outline_error: the systematic error (px RMS) the outlines may carry that their
-            symmetry residual does not show: segmentation bias, lens distortion, an
+            symmetry residual does not show (None: ``options.outline_error_px``, 0.1 px
+            by default): segmentation bias, lens distortion, an
             object that is not quite a surface of revolution.  The bundle counts the
             focal length as determined only when the outlines show at least
             ``PERSPECTIVE_FACTOR`` (3) times this much perspective (see
@@ -329,6 +339,14 @@ def calibrate(
             (``experiments/noise_floor.py``).  Without ``outline_noise`` (given or
             read from the outlines) it has no effect.
         throw: raise :class:`CalibrationError` instead of returning a failed result.
+        options: every threshold and budget of the per-view fits, the bundle, the
+            verdicts, the model checks and the messages (:class:`sorjax.Options`, its
+            docstring says what each one does and where its default comes from), or
+            None for the defaults; ``n_samples`` and ``outline_error``, when given,
+            replace its ``n_samples`` and ``outline_error_px``.  A ValueError names a
+            field that is not a number (NaN included).  The thresholds are traced:
+            calibrating with other thresholds compiles nothing new (the budgets and
+            ``n_samples`` fix the compiled programs and do).
 
     Returns:
         :class:`Calibration` with ``K`` (pixels) and a result code.
@@ -361,9 +379,10 @@ def calibrate(
       above ``WEAK_REL_STD`` (5 %; residual taken as at least 0.1 px) gives a warning
       saying what kind of extra view would help.
     """
-    outline_error, per_outline, measure, image_size, pp_fixed, f_fixed = _check_arguments(
+    options, outline_error, per_outline, measure, image_size, pp_fixed, f_fixed = _check_arguments(
         method, aspect_ratio, distortion, n_samples, n_points, outline_error, image_size, principal_point,
-        focal_length)
+        focal_length, options)
+    n_samples = options.n_samples
     prepared = _as_outlines(outlines, n_points)
     outs, smoothed = [o for o, _ in prepared], [j for _, j in prepared]
     noise = _outline_noise(outline_noise, outlines, len(outs))
@@ -371,10 +390,10 @@ def calibrate(
     aspect_ratio = _check_views(len(outs), per_outline, pp_fixed, f_fixed, aspect_ratio)
     homologies = _check_homologies(homologies, len(outs))
     if homologies is None:
-        homologies = tuple(fit_homology(o, n_samples=n_samples, n_points=n_points) for o in outs)
+        homologies = tuple(fit_homology(o, n_points=n_points, options=options) for o in outs)
     homologies = tuple(homologies)
     points = np.stack([np.asarray(o.points, np.float64) for o in outs])
-    homs = view_homologies(homologies, n_samples)
+    homs = view_homologies(homologies, n_samples, options)
     raw = list(outlines) if isinstance(outlines, (list, tuple, np.ndarray)) else []
     outline_error, notes = _grid_floor(raw, smoothed, float(outline_error), measure)
     if measure and per_outline is None:
@@ -390,24 +409,24 @@ def calibrate(
     run = functools.partial(_run_core, points, homs, method, aspect, image_size=size, distortion=distortion,
                             fixed=fixed, noise=noise, noise_ell=noise_ell)
     if measure:
-        r, outline_error, left_out, more = _measured(run, per_outline, float(outline_error), n_samples)
+        r, outline_error, left_out, more = _measured(run, per_outline, float(outline_error), options)
         notes += more
     else:
-        r, left_out = run(Options(n_samples=n_samples, outline_error_px=outline_error)), {}
-    dup_of = np.asarray(r.checks.duplicate_of)
-    notes = (notes + view_notes(homs, r.drop_reason, dup_of=dup_of) + model_notes(r, outline_error, fixed)
-             + distortion_notes(r, distortion, outline_error) + verdict_notes(r, method, a, outs))
+        r, left_out = run(dataclasses.replace(options, outline_error_px=outline_error)), {}
+    dup_of, o = np.asarray(r.checks.duplicate_of), options
+    notes = (notes + view_notes(homs, r.drop_reason, dup_of=dup_of, options=o) + model_notes(r, outline_error, fixed, o)
+             + distortion_notes(r, distortion, outline_error, o) + verdict_notes(r, method, a, outs, o))
     for msg in notes:
         warnings.warn(msg, stacklevel=2)
-    details = details_for(r, homs, outs, method, a, outline_error, image_size, pp_fixed, fixed)
+    details = details_for(r, homs, outs, method, a, outline_error, image_size, pp_fixed, fixed, o)
     cal = _calibration(r, homologies, method, a, details, left_out, notes, outline_error, distortion, pp_fixed,
-                       f_fixed, tuple(dropped_views(homs, r.drop_reason, dup_of)))
+                       f_fixed, tuple(dropped_views(homs, r.drop_reason, dup_of, o)))
     if throw and not cal.success:
         raise CalibrationError(cal.message)
     return cal
 
 
-def _measured(run, per_outline, floor_px: float, n_samples: int):
+def _measured(run, per_outline, floor_px: float, options: Options):
     """The calibration of outlines of measured quality (``outline_error="measured"``):
     the outline error measured (:func:`measured_outline_error`, at least ``floor_px``),
     a view the consistency check blames almost alone left out and the rest calibrated
@@ -415,18 +434,20 @@ def _measured(run, per_outline, floor_px: float, n_samples: int):
     leave-one-view-out check (:func:`jackknife`; pinhole only).  ``run(options,
     leave_out=...)``: :func:`_run_core` with everything else bound (a
     ``functools.partial``: the outlines, homologies, method, aspect ratio, image size,
-    lens model, fixed intrinsics and noise floors).  Returns ``(r, outline_error,
+    lens model, fixed intrinsics and noise floors); ``options``: the calibration's
+    thresholds (its ``outline_error_px`` replaced by the measured one).  Returns ``(r, outline_error,
     left_out {view: why}, notes)``."""
     points, homs, method, aspect = run.args
     kw = run.keywords
 
     def measured(left_out):
-        return measured_outline_error(homs, points, per_outline, floor=floor_px, options=Options(n_samples=n_samples),
+        return measured_outline_error(homs, points, per_outline, floor=floor_px, options=base,
                                       left_out=list(left_out), noise=kw["noise"])
 
+    base = options
     outline_error, note = measured({})
     notes = [note]
-    options = Options(n_samples=n_samples, outline_error_px=float(outline_error))
+    options = dataclasses.replace(base, outline_error_px=float(outline_error))
     r = run(options)
     left_out: dict[int, str] = {}
     while len(left_out) < int(options.measured_leave_out):
@@ -437,7 +458,7 @@ def _measured(run, per_outline, floor_px: float, n_samples: int):
         notes.append(_left_out_text(r, j, share))
         left_out[j] = f"inconsistent with the other views ({100 * share:.0f} % of the consistency score)"
         outline_error, notes[0] = measured(left_out)
-        options = Options(n_samples=n_samples, outline_error_px=float(outline_error))
+        options = dataclasses.replace(base, outline_error_px=float(outline_error))
         r = run(options, leave_out=list(left_out))
     if kw["distortion"] == "none":
         r, jack_notes = jackknife(r, points, homs, method, aspect, options, kw["image_size"], kw["fixed"],

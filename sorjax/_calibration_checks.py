@@ -6,11 +6,12 @@ says what is wrong and what to pass instead."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
-from ._checks import check_sizes
+from ._checks import check_options, check_sizes
 from ._homology import Homology
 from ._calibration_thresholds import OUTLINE_ERROR_PX
 
@@ -101,9 +102,10 @@ def _check_homologies(homologies, n_views):
 _check_sizes = check_sizes  # n_samples, n_points: the same rules as fit_homology's (sorjax._checks)
 
 
-def _check_outline_error(outline_error):
+def _check_outline_error(outline_error, default: float = OUTLINE_ERROR_PX):
     """``(declared px, per-outline errors (px) or None, measured?)`` from
-    :func:`calibrate`'s ``outline_error``: a number, "measured" or one number per outline."""
+    :func:`calibrate`'s ``outline_error``: a number, "measured" or one number per outline
+    (these two with ``default`` px as the declared floor)."""
     bad = ("outline_error must be a finite number of pixels >= 0, 'measured' (taken from the outlines' symmetry "
            f"residuals), or one such number per outline (NaN: no estimate); got {outline_error!r:.80}.")
 
@@ -116,7 +118,7 @@ def _check_outline_error(outline_error):
     if isinstance(outline_error, str):
         if outline_error != "measured":
             raise ValueError(bad)
-        return OUTLINE_ERROR_PX, None, True
+        return default, None, True
     if isinstance(outline_error, (list, tuple, np.ndarray)):
         try:
             vals = np.asarray(outline_error).tolist() if np.ndim(outline_error) == 1 else None
@@ -124,7 +126,7 @@ def _check_outline_error(outline_error):
             vals = None
         if not vals:
             raise ValueError(bad)
-        return OUTLINE_ERROR_PX, np.array([px(x, nan_ok=True) for x in vals]), True
+        return default, np.array([px(x, nan_ok=True) for x in vals]), True
     return px(outline_error), None, False
 
 
@@ -151,18 +153,25 @@ def _outline_noise(outline_noise, outlines, n: int, name: str = "outline_noise",
 
 
 def _check_arguments(method, aspect_ratio, distortion, n_samples, n_points, outline_error, image_size,
-                     principal_point, focal_length):
-    """:func:`calibrate`'s arguments checked before any outline is read: ``(outline_error
-    px, per-outline errors or None, measured?, image_size, principal point fixed, focal
-    length fixed)``; a ValueError that says what is wrong otherwise."""
+                     principal_point, focal_length, options=None):
+    """:func:`calibrate`'s arguments checked before any outline is read: ``(options,
+    outline_error px, per-outline errors or None, measured?, image_size, principal point
+    fixed, focal length fixed)``, ``options`` with ``n_samples`` (None: its own) in it;
+    a ValueError that says what is wrong otherwise."""
     _check_method(method, aspect_ratio)
     if not isinstance(distortion, str) or distortion not in ("none", "k1", "k1k2"):
         raise ValueError(f"distortion must be 'none', 'k1' or 'k1k2' (OpenCV's radial terms); got {distortion!r}.")
     if distortion != "none" and method != "bundle":
         raise ValueError(f"distortion={distortion!r} is estimated by the bundle only; use method='bundle' (the "
                          f"default) instead of {method!r}.")
-    _check_sizes(n_samples, n_points)
-    outline_error, per_outline, measure = _check_outline_error(outline_error)
+    options = check_options(options)
+    n_samples, _ = _check_sizes(options.n_samples if n_samples is None else n_samples, n_points)
+    options = dataclasses.replace(options, n_samples=n_samples)
+    default = options.outline_error_px
+    if not (math.isfinite(default) and default >= 0):
+        raise ValueError(f"options.outline_error_px must be a finite number of pixels >= 0; got {default!r}.")
+    outline_error, per_outline, measure = _check_outline_error(default if outline_error is None else outline_error,
+                                                               default)
     if image_size is not None:
         try:
             iw, ih = (int(x) for x in image_size)
@@ -174,7 +183,7 @@ def _check_arguments(method, aspect_ratio, distortion, n_samples, n_points, outl
                              f"{image_size!r}.") from None
         image_size = (iw, ih)
     pp_fixed, f_fixed = _check_fixed(principal_point, focal_length, image_size, method)
-    return outline_error, per_outline, measure, image_size, pp_fixed, f_fixed
+    return options, outline_error, per_outline, measure, image_size, pp_fixed, f_fixed
 
 
 def _check_views(n: int, per_outline, pp_fixed, f_fixed, aspect_ratio):

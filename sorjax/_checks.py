@@ -9,7 +9,7 @@ import numbers
 
 import numpy as np
 
-__all__ = ["boolean", "check_sizes", "integer", "number"]
+__all__ = ["boolean", "check_options", "check_sizes", "integer", "number"]
 
 
 def _is_bool(value) -> bool:
@@ -71,3 +71,35 @@ def check_sizes(n_samples, n_points) -> tuple[int, int]:
     if n_samples > n_points:
         raise ValueError(f"n_samples ({n_samples}) must not exceed n_points ({n_points}).")
     return n_samples, n_points
+
+
+def check_options(options):
+    """``options`` (:class:`sorjax.Options`; None: the defaults) checked field by field:
+    each budget an integer (``max_steps`` and ``bundle_max_steps`` >= 1, the others >= 0;
+    ``n_samples`` as :func:`check_sizes` says, checked there), each threshold a real
+    number that is not NaN (an infinite threshold switches its test off).  Returns the
+    options with every field a Python number, so that two equal options compile the
+    same program."""
+    import dataclasses
+
+    from .core._options import Options
+
+    if options is None:
+        return Options()
+    if not isinstance(options, Options):
+        raise ValueError(f"options must be a sorjax.Options (the thresholds and budgets; sorjax.Options(name=value, "
+                         f"...)), or None for the defaults; got {type(options).__name__}.")
+    new = {}
+    for f in dataclasses.fields(options):
+        value, name = getattr(options, f.name), f"options.{f.name}"
+        if isinstance(value, np.ndarray) and value.shape == ():
+            value = value.item()
+        if f.metadata.get("static", False) or f.name == "measured_leave_out":
+            lo = 1 if f.name in ("max_steps", "bundle_max_steps") else 0
+            new[f.name] = integer(value, name, lo=lo, what="a step or round budget, or a count")
+        else:
+            if _is_bool(value) or not isinstance(value, numbers.Real) or math.isnan(float(value)):
+                raise ValueError(f"{name} must be a real number (a threshold; inf switches its test off); "
+                                 f"got {value!r}.")
+            new[f.name] = float(value)
+    return dataclasses.replace(options, **new)

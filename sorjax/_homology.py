@@ -43,6 +43,7 @@ jitted call, then a :class:`Homology`.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import equinox as eqx
@@ -51,7 +52,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from ._checks import boolean, check_sizes, integer, number
+from ._checks import boolean, check_options, check_sizes, integer, number
 from ._outline import DEFAULT_POINTS, make_outline, perimeter
 
 
@@ -144,7 +145,7 @@ from .core._viewfit import fit_view, pixel_homology  # noqa: E402
 DEFAULT_SAMPLES = Options().n_samples
 
 
-@functools.partial(one_off_jit, static_argnames=("options", "smooth"))
+@functools.partial(one_off_jit, static_argnames=("smooth",))
 def _fit_core(points, init, options, smooth):
     """Prepare one outline (pixels), fit it and express the fit in pixels."""
     views = prepare_views(points[None], options.n_samples, smooth)
@@ -180,32 +181,40 @@ def _check_init(init):
 def fit_homology(
     outline,
     *,
-    n_samples: int = DEFAULT_SAMPLES,
+    n_samples: int | None = None,
     n_points: int = DEFAULT_POINTS,
     init=None,
-    max_steps: int = 100,
+    max_steps: int | None = None,
     smooth_px: float = 0.0,
     robust: bool = True,
+    options: Options | None = None,
 ) -> Homology:
     """Fit the harmonic homology of one outline by minimising eq. 20.
 
     Args:
         outline: (N, 2) pixel coordinates of a closed outline, or an :class:`Outline`.
         n_samples: number of samples ``x_i`` evenly spaced along the outline (the paper
-            uses 100).
+            uses 100); None: ``options.n_samples`` (100 by default).
         n_points: the outline is resampled to this many points for its distance field.
         init: optional starting homology ``(v_x, l_s)`` in pixels (homogeneous); by
             default the start is found automatically (bitangents of the convex hull,
             a symmetry-axis search and, for a nearly conic outline, pole-polar pairs
             of its conic; the lowest screened cost wins).
-        max_steps: step limit of each polishing solve.
+        max_steps: step limit of each polishing solve; None: ``options.max_steps`` (100
+            by default).
         smooth_px: smooth the outline along the curve (Gaussian, std in px of arc
             length) before building its distance field and samples; 0 (default) uses
             the outline as given.
         robust: trim samples whose residual is an outlier (a handle, a shadow, an
             occlusion: above ``max(trim_k * 1.4826 median|r|, trim_floor_px)``) and
-            refit, ``Options().trim_rounds`` times at most, never below half of the
+            refit, ``options.trim_rounds`` times at most, never below half of the
             samples; ``Homology.inliers`` says which were kept.
+        options: the per-view fit's thresholds and budgets (:class:`sorjax.Options`:
+            ``trim_k``, ``trim_floor_px``, ``screen_steps``, ``trim_rounds``,
+            ``covariance_smooth_px``, ``noise_ell_min_px``, ``noise_ell_max_px``; the
+            fit's ``infinity_z`` and ``conic_*`` verdicts are read by the calibration);
+            None: the defaults.  ``n_samples`` and ``max_steps``, when given, replace
+            its fields.  Thresholds are traced: other values compile nothing new.
 
     Returns:
         :class:`Homology` in pixels, with the RMS symmetry residual in px.
@@ -219,16 +228,18 @@ def fit_homology(
     The fit is :func:`sorjax.core._viewfit.fit_view` (pure, jit / vmap-able), run once
     under ``jax.jit``.
     """
-    n_samples, n_points = check_sizes(n_samples, n_points)
-    max_steps = integer(max_steps, "max_steps", lo=1, hi=100_000, what="steps of each polishing solve")
+    options = check_options(options)
+    n_samples, n_points = check_sizes(options.n_samples if n_samples is None else n_samples, n_points)
+    max_steps = integer(options.max_steps if max_steps is None else max_steps, "max_steps", lo=1, hi=100_000,
+                        what="steps of each polishing solve")
     smooth_px = number(smooth_px, "smooth_px", lo=0.0, unit="px of arc length")
     robust = boolean(robust, "robust")
     init = _check_init(init)
     o = make_outline(outline, n_points)
     pts = np.asarray(o.points)
     smooth = float(smooth_px) / (perimeter(pts) / o.n_points) if smooth_px else 0.0
-    options = Options(n_samples=int(n_samples), max_steps=int(max_steps),
-                      trim_rounds=Options().trim_rounds if robust else 0)
+    options = dataclasses.replace(options, n_samples=int(n_samples), max_steps=int(max_steps),
+                                  trim_rounds=options.trim_rounds if robust else 0)
     if init is not None:
         init = tuple(jnp.asarray(a) for a in init)
     h = _fit_core(jnp.asarray(pts), init, options, smooth)

@@ -97,7 +97,7 @@ def _fmt_std(x, sd):
     return f"{xs} +- {sd:.2g}" if np.isfinite(sd) else f"{xs} +- inf"
 
 
-def _implausible_text(code: int, est, outs, image_size=None) -> str:
+def _implausible_text(code: int, est, outs, image_size=None, options: Options = _O) -> str:
     """The text of :func:`sorjax.core._assess.implausible`'s ``code`` for the estimate
     ``est = (fu, fv, u0, v0)`` (px) and the outlines ``outs`` (empty when plausible)."""
     if code == USED:
@@ -118,7 +118,7 @@ def _implausible_text(code: int, est, outs, image_size=None) -> str:
         return (
             f"the estimate (fu = {est[0]:.0f}, fv = {est[1]:.0f} px) gives the {w}x{h} image a field of view of "
             f"{fov[0]:.0f} x {fov[1]:.0f} deg, beyond what lenses without distortion reach "
-            f"({MAX_FOV_DEG:g} deg): the outlines' errors, not their perspective, made it"
+            f"({options.max_fov_deg:g} deg): the outlines' errors, not their perspective, made it"
         )
     if code == PP_OUTSIDE:
         return (
@@ -144,11 +144,11 @@ def _code_item(result):
     return RESULTS._name_to_item[code_name(result)]
 
 
-def _drop_texts(h, i: int, d: int, name: str, dup_of=None):
+def _drop_texts(h, i: int, d: int, name: str, dup_of=None, options: Options = _O):
     """``(reason, warning)`` for view ``i`` dropped by the core for reason ``d``
     (:data:`sorjax.core._assess.DROP_REASONS`; ``dup_of`` (V,) the view each
-    duplicates), or None when it is used."""
-    o = Options()
+    duplicates; ``options``: the thresholds), or None when it is used."""
+    o = options
     rms = max(float(h.rms[i]), float(h.rms_untrimmed[i]))
     tr = float(h.trimmed[i])
     if d == CONIC:
@@ -182,17 +182,17 @@ def _drop_texts(h, i: int, d: int, name: str, dup_of=None):
     return None
 
 
-def view_notes(h, drop_reason, names=None, dup_of=None) -> list[str]:
+def view_notes(h, drop_reason, names=None, dup_of=None, options: Options = _O) -> list[str]:
     """The per-view warnings of a calibration, from the per-view homologies ``h``
     (:class:`sorjax.core.ViewHomologies`, numpy) and the core's drop reasons: fits
     that did not converge, views dropped (conic, not symmetric) and kept with a
-    caveat (trimmed, high residual)."""
+    caveat (trimmed, high residual), by the thresholds of ``options``."""
     names = names or [f"view {i}" for i in range(len(drop_reason))]
-    o = Options()
+    o = options
     notes = [f"{name}: the homology fit did not converge (rms {float(h.rms[i]):.3g} px)."
              for i, name in enumerate(names) if not bool(h.converged[i])]
     for i, name in enumerate(names):
-        dropped = _drop_texts(h, i, int(drop_reason[i]), name, dup_of)
+        dropped = _drop_texts(h, i, int(drop_reason[i]), name, dup_of, o)
         if dropped is not None:
             if dropped[1]:
                 notes.append(dropped[1])
@@ -207,11 +207,11 @@ def view_notes(h, drop_reason, names=None, dup_of=None) -> list[str]:
     return notes
 
 
-def dropped_views(h, drop_reason, dup_of=None) -> tuple[tuple[int, str], ...]:
+def dropped_views(h, drop_reason, dup_of=None, options: Options = _O) -> tuple[tuple[int, str], ...]:
     """``(view index, reason)`` of each view the core left out."""
     out = []
     for i, d in enumerate(np.asarray(drop_reason)):
-        dropped = _drop_texts(h, i, int(d), f"view {i}", dup_of)
+        dropped = _drop_texts(h, i, int(d), f"view {i}", dup_of, options)
         if dropped is not None:
             out.append((i, dropped[0]))
     return tuple(out)
@@ -223,7 +223,7 @@ def _advice_for(r, points, free_aspect: bool) -> list[str]:
                    [points[i] for i in used], free_aspect, bool(r.aspect_weak), list(used))
 
 
-def verdict_notes(r, method: str, a, points=None) -> list[str]:
+def verdict_notes(r, method: str, a, points=None, options: Options = _O) -> list[str]:
     """The warning of a successful but weak calibration (its focal length uncertain by
     more than ``Options.weak_rel_std``), from the core's result ``r`` (numpy)."""
     if code_name(r.result) != "successful" or not np.isfinite(float(r.weak)):
@@ -231,7 +231,7 @@ def verdict_notes(r, method: str, a, points=None) -> list[str]:
     tips = ("; ".join(_advice_for(r, points, a is None)) + ".") if points is not None else "add views."
     return [
         f"weak geometry: the focal length is uncertain by {100 * float(r.weak):.3g} % (1 sigma, for a "
-        f"symmetry residual (or outline noise) of {max(float(r.s_px), Options().residual_floor_px):.2g} px): " + tips
+        f"symmetry residual (or outline noise) of {max(float(r.s_px), options.residual_floor_px):.2g} px): " + tips
     ]
 
 
@@ -271,13 +271,13 @@ def _fixed_text(ch, fixed) -> str:
             f"released model moves {moves or 'nothing'} px")
 
 
-def distortion_notes(r, distortion: str, outline_error: float) -> list[str]:
+def distortion_notes(r, distortion: str, outline_error: float, options: Options = _O) -> list[str]:
     """The warning of a distortion model the outlines do not support (the
     distortion-free K returned, its std widened), from the core's result ``r``."""
     if distortion == "none" or np.all(np.isfinite(np.asarray(r.distortion))):
         return []
     g, z = float(r.distortion_px), float(r.distortion_z)
-    o = Options()
+    o = options
     why = (f"noise alone could do (needs z >= {o.perspective_z:g})" if not z >= o.perspective_z else
            f"a systematic outline error of {float(outline_error):g} px (outline_error) could do (needs >= "
            f"{o.perspective_factor * float(outline_error):.2g} px)")
@@ -288,7 +288,7 @@ def distortion_notes(r, distortion: str, outline_error: float) -> list[str]:
             "and corners, where distortion is strongest."]
 
 
-def model_notes(r, outline_error: float, fixed=None) -> list[str]:
+def model_notes(r, outline_error: float, fixed=None, options: Options = _O) -> list[str]:
     """The warning of a calibration whose model the outlines do not confirm (the
     uncertainty widened: :mod:`sorjax.core._checks`), from the core's result ``r``;
     ``fixed``: the intrinsics held fixed (px, NaN: free) or None."""
@@ -297,7 +297,7 @@ def model_notes(r, outline_error: float, fixed=None) -> list[str]:
                                                                       "only_principal_point"):
         return []
     notes = []
-    if np.isfinite(float(ch.aspect_z)) and float(ch.aspect_z) >= Options().consistency_z:
+    if np.isfinite(float(ch.aspect_z)) and float(ch.aspect_z) >= options.consistency_z:
         notes.append(
             _aspect_text(ch) + f", within what the outline error allowed for ({float(outline_error):g} px) could "
             "cause. The standard deviations include the difference between the fixed and the free estimates; "
@@ -321,14 +321,14 @@ def model_notes(r, outline_error: float, fixed=None) -> list[str]:
 
 
 def details_for(r, h, points, method: str, a, outline_error: float, image_size=None, fixed_pp=None,
-                fixed=None) -> str:
+                fixed=None, options: Options = _O) -> str:
     """What is specific to a result that is not a plain success (``Calibration.details``);
     ``fixed_pp``: the principal point held fixed (px) or None; ``fixed``: every
     intrinsic held fixed (px, NaN: free) or None."""
     name = code_name(r.result)
     if name == "inconsistent":
         ch = r.checks
-        lim = f"{Options().perspective_factor * float(outline_error):.2g}"
+        lim = f"{options.perspective_factor * float(outline_error):.2g}"
         if int(ch.culprit) == CULPRIT_ASPECT:
             return (_aspect_text(ch) + f", more than the outline error allowed for ({float(outline_error):g} px; "
                     f"needs < {lim} px) can explain. Pass aspect_ratio=None to estimate it, or the right value "
@@ -349,7 +349,7 @@ def details_for(r, h, points, method: str, a, outline_error: float, image_size=N
     drop = np.asarray(r.drop_reason)
     vs = ", ".join(str(i) for i in used)
     if name == "too_few_views":
-        why = "; ".join(f"view {i}: {reason}" for i, reason in dropped_views(h, drop))
+        why = "; ".join(f"view {i}: {reason}" for i, reason in dropped_views(h, drop, options=options))
         if fixed_pp is not None:
             return (f"{len(drop)} views given, {len(used)} usable ({why}). With the principal point fixed one view "
                     "is enough, but none is left.")
@@ -395,11 +395,11 @@ def details_for(r, h, points, method: str, a, outline_error: float, image_size=N
         std = np.asarray(r.std)
         d_ = ", ".join(f"{n} = {_fmt_std(x, s)} px" for n, x, s, d in zip(_NAMES, est, std, det) if d)
         u_ = ", ".join(f"{n} ({_fmt_std(x, s)} px)" for n, x, s, d in zip(_NAMES, est, std, det) if not d)
-        why = _implausible_text(int(r.implausible), np.array(est), [points[i] for i in used], image_size)
+        why = _implausible_text(int(r.implausible), np.array(est), [points[i] for i in used], image_size, options)
         why = f" Not a plausible camera: {why}." if why else ""
         if not bool(r.perspective_ok):
             z, g = float(r.perspective_z), float(r.perspective_px)
-            o = Options()
+            o = options
             why += (
                 f" The outlines show too little perspective to fix the focal length: the best camera with "
                 f"no perspective fits them only {g:.2g} px RMS worse (z = {z:.2g}), which "
