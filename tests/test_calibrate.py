@@ -1,5 +1,7 @@
 """calibrate(): Methods I / IIa / IIb and the bundle against ground truth, bad input."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -273,14 +275,15 @@ def test_measured_outline_error_refuses_a_confident_wrong_focal_length():
             sorjax.calibrate(outs, homologies=homs, outline_error=bad)
 
 
-def _measured(outs):
+def _measured(outs, **options):
     """``calibrate(outs, outline_error="measured")`` (the image path) on a 640x480
-    image, and its warnings' texts."""
+    image (``options``: fields of :class:`sorjax.Options`), and its warnings' texts."""
     import warnings
 
     with warnings.catch_warnings(record=True) as ws:
         warnings.simplefilter("always")
-        cal = sorjax.calibrate(outs, outline_error="measured", image_size=(640, 480))
+        cal = sorjax.calibrate(outs, outline_error="measured", image_size=(640, 480),
+                               options=sorjax.Options(**options))
     return cal, [str(w.message) for w in ws]
 
 
@@ -336,3 +339,26 @@ def test_measured_outlines_leave_out_the_view_the_consistency_check_blames():
     assert cal.outline_error == pytest.approx(alone.outline_error)
     few, ws = _measured(good[:2] + [stranger])
     assert not few.success and few.dropped == () and not any("left out:" in w for w in ws)
+
+
+def test_measured_quality_options_by_their_effect():
+    """``Options.measured_undetermined`` (the widened std's limit, a fraction of f),
+    ``measured_leave_share`` and ``measured_leave_out`` reach the measured-quality runs:
+    each just inside and just outside the value the calibration measured (the stranger
+    of the test above holds 91 % of the consistency score)."""
+    good, _ = _good_views()
+    cal, _ = _measured(good)
+    est = np.array([cal.fu, cal.fv, cal.u0, cal.v0])
+    ratio = np.max(cal.std / math.sqrt(est[0] * est[1]))
+    assert _measured(good, measured_undetermined=ratio * (1 + 1e-6))[0].success
+    out, ws = _measured(good, measured_undetermined=ratio * (1 - 1e-6))
+    assert not out.success and any(f"at most {ratio * (1 - 1e-6):.3g} of the focal length" in w for w in ws)
+    stranger = scenes.random_sor_scene(100, 1, K=scenes.intrinsics(300.0, principal_point=(200.0, 150.0))).outlines[0]
+    views = good[:2] + [stranger] + good[2:]
+    cal, _ = _measured(views)
+    share = float(cal.dropped[0][1].split("(")[1].split(" %")[0]) / 100  # 91 %, as printed
+    assert _measured(views, measured_leave_share=share - 0.01)[0].dropped[0][0] == 2
+    kept, ws = _measured(views, measured_leave_share=share + 0.01)
+    assert kept.dropped == () and not any("left out:" in w for w in ws)
+    kept, ws = _measured(views, measured_leave_out=0)
+    assert kept.dropped == () and not any("left out:" in w for w in ws)
