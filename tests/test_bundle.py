@@ -222,20 +222,6 @@ def test_make_problem_is_pure_and_masks_views():
     assert np.all(np.isfinite(np.asarray(m.samples)))
 
 
-@pytest.mark.slow
-def test_implicit_gradient_of_intrinsics_matches_finite_differences(scene):
-    outs = [scenes.paper_noise(o, 0.5, 7 + i) for i, o in enumerate(scene.outlines)]
-    cal = sorjax.calibrate(outs, n_points=256)
-    P = jnp.stack([sorjax.make_outline(o, 256).points for o in outs])
-    k = losses.calibrated_intrinsics(P, cal)
-    np.testing.assert_allclose(np.asarray(k), [cal.fu, cal.fv, cal.u0, cal.v0], rtol=1e-5)
-    g = jax.grad(lambda p: losses.calibrated_intrinsics(p, cal)[1])(P)
-    d = jnp.asarray(np.random.default_rng(0).normal(size=P.shape))
-    h = 1e-3
-    fd = (losses.calibrated_intrinsics(P + h * d, cal)[1] - losses.calibrated_intrinsics(P - h * d, cal)[1]) / (2 * h)
-    np.testing.assert_allclose(float(jnp.sum(g * d)), float(fd), rtol=2e-3)
-
-
 def test_predicted_error_properties(scene):
     p1 = sorjax.predicted_error(scene, 1.0, aspect_ratio=1.0, n_points=256, n_samples=50)
     p2 = sorjax.predicted_error(scene, 2.0, aspect_ratio=1.0, n_points=256, n_samples=50)

@@ -3,7 +3,8 @@ distorted scenes (sorjax.scenes ... distortion=(k1, k2)): K and k recovered, the
 evidence for distortion, the distortion-free path untouched.
 
 Three views of M = 1024 points, 100 samples, as tests/test_core_bundle.py; the "k1"
-program is compiled once (about a minute here), the "k1k2" one only under -m slow."""
+program is compiled once (about a minute here), the "k1k2" one and its gradient once
+each."""
 
 import jax
 import jax.numpy as jnp
@@ -90,11 +91,13 @@ def test_unknown_model_refused():
         bundle_estimate_distorted(*_inputs(scenes.two_spheres(f=F, n_views=2)), OPTIONS, distortion="k3")
 
 
-@pytest.mark.slow
 def test_k1k2_exact_and_differentiable():
+    """Two compiled programs: the estimate (the exact fit and the finite differences
+    below) and its implicit gradient."""
     sc = scenes.two_spheres(f=F, n_views=4, distortion=(-0.25, 0.1))
     args = _inputs(sc)
-    out = bundle_estimate_distorted(*args, OPTIONS, distortion="k1k2")
+    estimate = jax.jit(lambda p: bundle_estimate_distorted(p, *args[1:], OPTIONS, distortion="k1k2"))
+    out = estimate(args[0])
     assert bool(out.ok)
     np.testing.assert_allclose(np.asarray(out.fit.K), sc.K, atol=2e-3)
     np.testing.assert_allclose(np.asarray(out.k), [-0.25, 0.1], atol=1e-5)
@@ -108,14 +111,11 @@ def test_k1k2_exact_and_differentiable():
     pn = args[0] + jnp.asarray(np.random.default_rng(1).normal(size=args[0].shape)) * 1e-4
     direction = jnp.asarray(np.random.default_rng(0).normal(size=pn.shape)) * 1e-3
 
-    def k1(t):
-        return bundle_estimate_distorted(pn + t * direction, *args[1:], OPTIONS, distortion="k1k2").k[0]
-
-    g = float(jax.grad(k1)(0.0))
-    f = jax.jit(k1)
+    g = float(jax.jit(jax.grad(
+        lambda t: bundle_estimate_distorted(pn + t * direction, *args[1:], OPTIONS, distortion="k1k2").k[0]))(0.0))
 
     def central(h):
-        return (float(f(h)) - float(f(-h))) / (2 * h)
+        return (float(estimate(pn + h * direction).k[0]) - float(estimate(pn - h * direction).k[0])) / (2 * h)
 
     c1, c3 = central(1e-3), central(3e-3)
     num = c1 - (c3 - c1) / 8.0  # d h^2 from the two, taken off C(1e-3)

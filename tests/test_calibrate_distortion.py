@@ -30,7 +30,6 @@ def test_k1_recovered_noise_free(distorted):
     assert np.isfinite(cal.distortion_std).all()
 
 
-@pytest.mark.slow  # 23 s warm, 64 s cold: run with -m slow
 def test_strong_distortion_past_wrong_linear_seeds():
     # k1 = -0.3 at f = 527 px (experiments/distortion.py's scene 1804): every linear
     # seed reads the distorted outlines as a pinhole's and lands at ~5x the true f, and

@@ -149,7 +149,6 @@ def test_end_to_end_run_directory_and_determinism(tmp_path):
     assert other[3]["methods"]["IIb"]["estimate"] != recs[3]["methods"]["IIb"]["estimate"]
 
 
-@pytest.mark.slow
 def test_a_trial_run_alone_equals_the_same_trial_in_a_chunk():
     """run_trial (a chunk of one: another compiled program) gives the numbers the
     trial had in a chunk of four, to round-off."""

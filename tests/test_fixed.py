@@ -2,8 +2,8 @@
 principal point and / or the focal length held at known values, and the focal length
 from a single view when the principal point is known.
 
-Every test but the slow one shares one compiled program (the core with fixed
-intrinsics, 4 padded views)."""
+Every test but the one with distortion shares one compiled program (the core with
+fixed intrinsics, 4 padded views)."""
 
 import warnings
 
@@ -149,7 +149,6 @@ def test_command_line_fixed_parameters(tmp_path, spheres, capsys):
     assert "u0 =    319.500 px  (fixed)" in out and "fv =    700.000 px" in out
 
 
-@pytest.mark.slow
 def test_fixed_principal_point_with_distortion():
     """The bundle with k1 and the principal point held fixed (another compiled
     program): K and k1 back to the truth on a distorted noise-free scene."""

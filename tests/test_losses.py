@@ -183,3 +183,9 @@ def test_grad_calibrated_intrinsics_wrt_points(scene, calibration):
         d = jnp.zeros_like(P).at[view, i].set(n)
         fd = (float(_fit(P + h * d, s)[1]) - float(_fit(P - h * d, s)[1])) / (2 * h)
         np.testing.assert_allclose(float(jnp.sum(g * d)), fd, rtol=1e-3)
+    # every point moved at once, along a random direction (seed 0; formerly a slow test
+    # of tests/test_bundle.py at another resolution: the same programs here)
+    d = jnp.asarray(np.random.default_rng(0).normal(size=P.shape))
+    h = 1e-3
+    fd = (float(_fit(P + h * d, s)[1]) - float(_fit(P - h * d, s)[1])) / (2 * h)
+    np.testing.assert_allclose(float(jnp.sum(g * d)), fd, rtol=2e-3)
