@@ -26,7 +26,7 @@ import jax
 import numpy as np
 
 from ._compile import one_off_jit
-from ._homology import DEFAULT_SAMPLES, fit_homology
+from ._homology import DEFAULT_SAMPLES, Homology, fit_homology
 from ._outline import DEFAULT_POINTS, _as_outlines
 from .core._calibrate import _intrinsics, calibrate_homologies
 from .core._options import Options
@@ -109,14 +109,10 @@ def _core_distorted(points, homs, aspect, options, image_size, valid, distortion
                                 distortion=distortion, fixed=fixed, noise=noise, noise_ell=noise_ell)
 
 
-def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, options: Options, image_size,
-              distortion: str = "none", fixed=None, leave_out: Sequence[int] = (), noise=None, noise_ell=None):
-    """The core on ``V`` views padded to :func:`_bucket` (copies of view 0, masked);
-    returns the result of ``method`` as numpy, cut back to ``V`` views.  ``fixed``
-    (4,) ``(fu, fv, u0, v0)`` px held fixed (NaN: free), or None; ``leave_out``: views
-    masked out as well (the same compiled program); ``noise`` (V,) the views' noise
-    floors, px, and ``noise_ell`` (V,) their correlation lengths, px (None: 0, the same
-    compiled program)."""
+def _core_call(points: np.ndarray, homs: ViewHomologies, method: str, aspect, options: Options, image_size,
+               distortion: str = "none", fixed=None, leave_out: Sequence[int] = (), noise=None, noise_ell=None):
+    """``(program, args, kwargs)``: the compiled core and its arguments for ``V`` views
+    padded to :func:`_bucket` (copies of view 0, masked); see :func:`_run_core`."""
     V = points.shape[0]
     B = _bucket(V)
     pad = lambda x: np.concatenate([x, np.repeat(x[:1], B - V, axis=0)]) if B > V else x  # noqa: E731
@@ -128,10 +124,34 @@ def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, opt
     noise = pad(np.zeros(V) if noise is None else np.asarray(noise, np.float64))
     noise_ell = pad(np.zeros(V) if noise_ell is None else np.asarray(noise_ell, np.float64))
     if distortion == "none":
-        r = _core(*args, fixed, noise, noise_ell, method=method)
-    else:
-        r = _core_distorted(*args, distortion, fixed, noise, noise_ell)
-    r = jax.tree_util.tree_map(np.asarray, r)
+        return _core, (*args, fixed, noise, noise_ell), {"method": method}
+    return _core_distorted, (*args, distortion, fixed, noise, noise_ell), {}
+
+
+def _prepare_core(points: np.ndarray, n_samples: int, *args, **kwargs) -> None:
+    """Start compiling (or loading) the core program :func:`_run_core` will call with
+    these arguments, in a host thread (:meth:`sorjax._compile.one_off_jit.prepare`),
+    while the per-view fits run: their homologies only fill arrays of known shapes."""
+    blank = Homology(l_s=np.zeros(3), v_x=np.zeros(3), W=np.eye(3), rms=0.0, cost=0.0, converged=True, steps=0,
+                     conic_rms=0.0, infinity_z=0.0, inliers=np.ones(n_samples, bool), rms_untrimmed=0.0,
+                     noise_ell=0.0)
+    homs = view_homologies([blank] * points.shape[0], n_samples)
+    program, a, kw = _core_call(points, homs, *args, **kwargs)
+    program.prepare(*a, **kw)
+
+
+def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, options: Options, image_size,
+              distortion: str = "none", fixed=None, leave_out: Sequence[int] = (), noise=None, noise_ell=None):
+    """The core on ``V`` views padded to :func:`_bucket` (copies of view 0, masked);
+    returns the result of ``method`` as numpy, cut back to ``V`` views.  ``fixed``
+    (4,) ``(fu, fv, u0, v0)`` px held fixed (NaN: free), or None; ``leave_out``: views
+    masked out as well (the same compiled program); ``noise`` (V,) the views' noise
+    floors, px, and ``noise_ell`` (V,) their correlation lengths, px (None: 0, the same
+    compiled program)."""
+    V = points.shape[0]
+    program, a, kw = _core_call(points, homs, method, aspect, options, image_size, distortion, fixed, leave_out,
+                                noise, noise_ell)
+    r = jax.tree_util.tree_map(np.asarray, program(*a, **kw))
     per_view = ("used", "drop_reason", "view_rms", "v_x", "l_s")
     r = eqx.tree_at(lambda x: [getattr(x, k) for k in per_view], r, [getattr(r, k)[:V] for k in per_view])
     per_check = ("view_score", "view_px", "duplicate_of")
@@ -389,15 +409,7 @@ def calibrate(
     noise_ell = _outline_noise(outline_noise_ell, outlines, len(outs), "outline_noise_ell", "noise_ell")
     aspect_ratio = _check_views(len(outs), per_outline, pp_fixed, f_fixed, aspect_ratio)
     homologies = _check_homologies(homologies, len(outs))
-    if homologies is None:
-        homologies = tuple(fit_homology(o, n_points=n_points, options=options) for o in outs)
-    homologies = tuple(homologies)
     points = np.stack([np.asarray(o.points, np.float64) for o in outs])
-    homs = view_homologies(homologies, n_samples, options)
-    raw = list(outlines) if isinstance(outlines, (list, tuple, np.ndarray)) else []
-    outline_error, notes = _grid_floor(raw, smoothed, float(outline_error), measure)
-    if measure and per_outline is None:
-        per_outline = _own_errors(raw)
     a = None if method in ("IIa",) or (method == "bundle" and aspect_ratio is None) else (
         1.0 if aspect_ratio is None else float(aspect_ratio)
     )
@@ -406,8 +418,17 @@ def calibrate(
         fixed = (math.nan, math.nan if f_fixed is None else f_fixed) + (pp_fixed or (math.nan, math.nan))
     aspect = math.nan if aspect_ratio is None else float(aspect_ratio)
     size = (math.nan, math.nan) if image_size is None else image_size
-    run = functools.partial(_run_core, points, homs, method, aspect, image_size=size, distortion=distortion,
-                            fixed=fixed, noise=noise, noise_ell=noise_ell)
+    core = dict(image_size=size, distortion=distortion, fixed=fixed, noise=noise, noise_ell=noise_ell)
+    _prepare_core(points, n_samples, method, aspect, options, **core)  # compiles beside the per-view fits
+    if homologies is None:
+        homologies = tuple(fit_homology(o, n_points=n_points, options=options) for o in outs)
+    homologies = tuple(homologies)
+    homs = view_homologies(homologies, n_samples, options)
+    raw = list(outlines) if isinstance(outlines, (list, tuple, np.ndarray)) else []
+    outline_error, notes = _grid_floor(raw, smoothed, float(outline_error), measure)
+    if measure and per_outline is None:
+        per_outline = _own_errors(raw)
+    run = functools.partial(_run_core, points, homs, method, aspect, **core)
     if measure:
         r, outline_error, left_out, more = _measured(run, per_outline, float(outline_error), options)
         notes += more

@@ -28,6 +28,7 @@ import io
 import os
 import pickle
 import re
+import threading
 from typing import Any, Callable
 
 #: XLA CPU options for a program that runs a few times (a calibration): less LLVM
@@ -43,6 +44,20 @@ ONE_OFF_TRIALS = 200
 
 _OPT_OUT = ("off", "0", "none", "false", "no")
 _cache_done = False
+_LOCK = threading.Lock()
+_POOL = None
+
+
+def _pool():
+    """The host thread that prepares programs ahead of their call (one: XLA compiles a
+    program on about one core, and the caller's own work takes the other)."""
+    global _POOL
+    with _LOCK:
+        if _POOL is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            _POOL = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sorjax-compile")
+    return _POOL
 
 
 def cache_dir() -> str | None:
@@ -205,6 +220,7 @@ class one_off_jit:
         self._jitted = self._plain = None
         self._signature = inspect.signature(fn)
         self._programs: dict[str, tuple[Callable, Any]] = {}
+        self._pending: dict[str, Any] = {}  # key -> the Future of a program being prepared (:meth:`prepare`)
         self._cannot_store = False  # an export failed here once: trace as jax.jit from then on
 
     def jitted(self):
@@ -237,9 +253,42 @@ class one_off_jit:
             return self.jitted()(*args, **kwargs)
         return run()
 
-    def _program(self, args, kwargs):
-        """A thunk running the stored program on these arguments (loading it, or
-        exporting and storing it, on first use)."""
+    def prepare(self, *args, **kwargs) -> None:
+        """Make this program for arguments like these (arrays of the same structure,
+        shapes and dtypes; their values do not matter) and start compiling it (or
+        loading it from the compilation cache) in a host thread, while the caller goes
+        on.  The tracing happens here, in the caller's thread (it holds Python's lock
+        anyway); XLA compiles outside that lock, so the program compiles beside the
+        caller's next work on a second core: :func:`sorjax.calibrate` prepares its core
+        before the per-view fits trace, compile and run.  The call with arguments of the
+        same structure waits for the compilation.  Does nothing when the program is
+        there already or programs are not stored; a failure here is left to that call."""
+        import jax
+
+        ensure_cache()
+        if self._cannot_store or not exports_enabled():
+            return
+        try:
+            key, flat, in_tree, static = self._key(args, kwargs)
+            with _LOCK:
+                if key in self._programs or key in self._pending:
+                    return
+            exported, out_tree = self._load(key) or self._export(key, flat, in_tree, static)
+            call = jax.jit(exported.call, compiler_options=compiler_options())
+            lowered = call.lower(*[jax.ShapeDtypeStruct(x.shape, x.dtype) for x in flat])
+        except Exception:  # left to the call
+            return
+
+        def finish():
+            self._programs[key] = program = (call, lowered.compile(), out_tree)
+            return program
+
+        pool = _pool()
+        with _LOCK:
+            self._pending[key] = pool.submit(finish)
+
+    def _key(self, args, kwargs):
+        """``(key, flat dynamic leaves, their tree, static arguments)`` of a call."""
         import jax
         import numpy as np
 
@@ -254,14 +303,42 @@ class one_off_jit:
         key = hashlib.sha256(_pickle((_source_hash(), self.__wrapped__.__module__, self.__wrapped__.__qualname__,
                                       in_tree, avals, sorted(static.items()),
                                       sorted((opts or {}).items())))).hexdigest()[:32]
-        program = self._programs.get(key)
-        if program is None:
-            program = self._load(key) or self._export(key, flat, in_tree, static)
-            exported, out_tree = program
-            program = (jax.jit(exported.call, compiler_options=opts), out_tree)
-            self._programs[key] = program
-        call, out_tree = program
-        return lambda: jax.tree_util.tree_unflatten(out_tree, call(*flat))
+        return key, flat, in_tree, static
+
+    def _build(self, key: str, flat, in_tree, static):
+        """The program of ``key`` (loaded, or exported and stored), jitted with
+        :data:`ONE_OFF`'s options."""
+        import jax
+
+        exported, out_tree = self._load(key) or self._export(key, flat, in_tree, static)
+        self._programs[key] = program = (jax.jit(exported.call, compiler_options=compiler_options()), None, out_tree)
+        return program
+
+    def _program(self, args, kwargs):
+        """A thunk running the stored program on these arguments (loading it, or
+        exporting and storing it, on first use; waiting for :meth:`prepare`'s)."""
+        import jax
+
+        key, flat, in_tree, static = self._key(args, kwargs)
+        with _LOCK:
+            pending = self._pending.pop(key, None)
+        if pending is not None:
+            try:
+                pending.result()
+            except Exception:  # made again below, where its error (if any) surfaces
+                self._programs.pop(key, None)
+        program = self._programs.get(key) or self._build(key, flat, in_tree, static)
+        call, compiled, out_tree = program
+
+        def run():
+            if compiled is not None:
+                try:
+                    return jax.tree_util.tree_unflatten(out_tree, compiled(*flat))
+                except TypeError:  # arguments typed otherwise than the prepared ones (weak types)
+                    pass
+            return jax.tree_util.tree_unflatten(out_tree, call(*flat))
+
+        return run
 
     @staticmethod
     def _path(key: str) -> str:

@@ -78,6 +78,28 @@ def test_a_new_static_value_or_shape_is_a_new_program(store):
     assert len(TRACES) == 3
 
 
+def test_a_prepared_program_is_traced_once_compiled_aside_and_gives_the_same_numbers(store):
+    """prepare() traces in the caller's thread, compiles in a host thread; the call with
+    other values of the same structure waits for it and runs the compiled program (no
+    second trace), with the numbers of jax.jit; another structure is another program."""
+    x, y = _args()
+    ref = jax.jit(_program, static_argnames="scale")(x, y, scale=2.0)
+    TRACES.clear()
+    f = C.one_off_jit(_program, static_argnames=("scale",))
+    f.prepare(np.zeros_like(x), np.eye(3), scale=2.0)
+    assert len(TRACES) == 1 and len(_stored(store)) == 1
+    out = f(x, y, scale=2.0)
+    assert len(TRACES) == 1 and not f._pending
+    (program,) = f._programs.values()
+    assert program[1] is not None  # the ahead-of-time compiled executable ran
+    np.testing.assert_allclose(out.value, ref.value, rtol=0, atol=1e-12)
+    assert out.label == "scale 2.0" and int(out.pair[1]) == 5
+    f.prepare(x, y, scale=2.0)  # there already: nothing to do
+    assert len(TRACES) == 1 and not f._pending
+    out = f(*_args(7), scale=2.0)  # not prepared: traced at the call
+    assert len(TRACES) == 2 and out.value.shape == (7,)
+
+
 def test_opting_out_stores_nothing(store, monkeypatch):
     x, y = _args()
     monkeypatch.setenv("SORJAX_EXPORT", "0")
