@@ -112,12 +112,15 @@ class TrialProgram:
     """The compiled program of a config: ``points (B, V, M, 2) -> (homologies,
     {method: CoreResult})`` with a leading trial axis, sharded over the devices.
 
-    Two stages, each one compiled program per shape: the per-view fits
-    (:func:`sorjax.core.fit_homologies`) and every method on them
-    (:func:`sorjax.core.calibrate_methods`).  Both are traced on the first chunk and
-    compiled side by side (:func:`sorjax.core.compile_together`: XLA compiles one
-    program on one core); on one CPU device each chunk's parts run side by side from
-    host threads, fits then methods (:class:`sorjax.core.TrialSharder`).  Reuse the
+    Stages, each one compiled program per shape: the per-view fits
+    (:func:`sorjax.core.fit_homologies`), then the methods on them
+    (:func:`sorjax.core.calibrate_methods`) in two programs, the bundles' and the
+    linear methods' (each its own concept: the bundles share one traced solver, the
+    linear methods one covariance; as one program they compiled in 37 s, as two in
+    19 + 14 s, side by side).  All are traced on the first chunk and compiled side by
+    side (:func:`sorjax.core.compile_together`: XLA compiles one program on one core);
+    on one CPU device each chunk's parts run side by side from host threads, fits then
+    methods (:class:`sorjax.core.TrialSharder`).  Reuse the
     instance for every chunk of a run.  ``compiler_options``: XLA's options for both
     stages (None: XLA's defaults; :func:`run_batch` picks
     :func:`sorjax._compile.options_for_runs` of its trial count: a short run is
@@ -131,9 +134,15 @@ class TrialProgram:
         aspects = np.array([_method_args(m)[1] for m in self.methods])
         sequential = jax.default_backend() == "cpu" and len(jax.devices()) == 1  # core.TrialSharder's ``batch``
         self.fits = core.TrialSharder(lambda points: core.fit_homologies(points, options, sequential))
-        self.calibrations = core.TrialSharder(
-            lambda points, homs: dict(zip(self.methods, core.calibrate_methods(points, homs, names, aspects,
-                                                                               options=options))))
+
+        def stage(idx):
+            ms, ns, asp = tuple(self.methods[i] for i in idx), tuple(names[i] for i in idx), aspects[list(idx)]
+            return core.TrialSharder(
+                lambda points, homs: dict(zip(ms, core.calibrate_methods(points, homs, ns, asp, options=options))))
+
+        bundles = tuple(i for i, n in enumerate(names) if n == "bundle")
+        linear = tuple(i for i, n in enumerate(names) if n != "bundle")
+        self.stages = [stage(idx) for idx in (bundles, linear) if idx]
         self.lower_s = self.compile_s = 0.0  # the last new shape's tracing and compilation (s)
         self._homs: dict = {}  # a part's shapes -> the fits' output shapes
 
@@ -142,32 +151,37 @@ class TrialProgram:
         return self.fits.split(points)
 
     def executables(self, part):
-        """The two stages' compiled programs for a part's shapes: traced one after the
-        other, compiled together, on first use (timed: :attr:`lower_s`,
-        :attr:`compile_s`)."""
+        """The stages' compiled programs for a part's shapes: ``(fits, [methods'
+        stages])``, traced one after the other, compiled together, on first use (timed:
+        :attr:`lower_s`, :attr:`compile_s`)."""
         key = core.TrialSharder.shape_key(part)
         if key not in self._homs:
             t0 = time.perf_counter()
             fits = self.fits.lower(*part)
             homs = jax.tree.map(lambda o: jax.ShapeDtypeStruct(o.shape, o.dtype, sharding=self.fits.sharding),
                                 fits.out_info)
-            cals = self.calibrations.lower(*part, homs)
+            cals = [st.lower(*part, homs) for st in self.stages]
             t1 = time.perf_counter()
-            exes = core.compile_together([fits, cals], self.compiler_options)
+            exes = core.compile_together([fits, *cals], self.compiler_options)
             self.fits.adopt(part, exes[0])
-            self.calibrations.adopt((*part, homs), exes[1])
+            for st, exe in zip(self.stages, exes[1:]):
+                st.adopt((*part, homs), exe)
             self._homs[key] = homs
             self.lower_s, self.compile_s = t1 - t0, time.perf_counter() - t1
-        return self.fits.executable(*part), self.calibrations.executable(*part, self._homs[key])
+        homs = self._homs[key]
+        return self.fits.executable(*part), [st.executable(*part, homs) for st in self.stages]
 
     def run_parts(self, parts):
-        """Both stages on every part (side by side from host threads when there are
+        """Every stage on every part (side by side from host threads when there are
         several), concatenated along the trial axis."""
-        fit, cal = self.executables(parts[0])
+        fit, cals = self.executables(parts[0])
 
         def both(*p):
             homs = fit(*p)
-            return homs, cal(*p, homs)
+            results = {}
+            for cal in cals:
+                results.update(cal(*p, homs))
+            return homs, {m: results[m] for m in self.methods}
 
         return self.fits.run_parts(both, parts)
 
