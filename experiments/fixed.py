@@ -6,7 +6,7 @@ Table 1, single view.  A vase (:func:`sorjax.scenes.vase`) seen from 20 deg abov
 centre moved ``d`` px right of the principal point (:func:`sorjax.scenes.pose_at_pixel`),
 K = diag(f, f) with the principal point (320, 240) on 640x480, f = 600 and 1200 px.
 ``theta`` is the angle between the optical axis and the plane through the revolution
-axis and the camera centre (eq. 37; :func:`sorjax._calibration._view_angles_deg` at the
+axis and the camera centre (eq. 37; :func:`sorjax._messages._view_angles_deg` at the
 truth): 0 when the object sits on the principal point (v_x at infinity).  Each
 outline is calibrated alone with ``principal_point`` at the truth (aspect ratio 1):
 noise-free (focal error, % of f, and the result code), and with the paper's noise
