@@ -366,6 +366,23 @@ def _outline_error_arg(text: str):
     return "measured" if text == "measured" else _nonnegative(text)
 
 
+def _option_arg(text: str):
+    """``--option NAME=VALUE``: a field of :class:`sorjax.Options` and its value."""
+    import dataclasses
+
+    from .core._options import Options
+
+    name, eq, value = text.partition("=")
+    fields = {f.name: f for f in dataclasses.fields(Options)}
+    if not eq or name.strip() not in fields:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE with NAME a field of sorjax.Options "
+                                         f"({', '.join(fields)}); got {text!r}")
+    try:  # budgets and counts are integers, thresholds numbers (checked again by calibrate)
+        return name.strip(), (int(value) if isinstance(getattr(Options(), name.strip()), int) else float(value))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{name.strip()}: not a number: {value!r}") from None
+
+
 def _finite_arg(what: str):
     """An argparse type: any finite number."""
 
@@ -428,7 +445,8 @@ def _calibrate(args) -> int:
         warnings.simplefilter("always")
         cal = sorjax.calibrate(outlines, method=args.method, aspect_ratio=args.aspect_ratio,
                                outline_error=outline_error, image_size=size, distortion=args.distortion,
-                               principal_point=principal_point, focal_length=args.focal)
+                               principal_point=principal_point, focal_length=args.focal,
+                               options=sorjax.Options(**dict(args.option)))
     for w in caught:
         print(f"warning: {w.message}", file=sys.stderr)
     used = set(cal.used)
@@ -568,6 +586,9 @@ def main(argv=None) -> int:
                         "symmetry residuals, at least 0.1 px (the default for photographs without --masks "
                         "and for .npz outline files whose outlines carry an outline_error; otherwise the "
                         "default is 0.1; 0 for exact outlines)")
+    c.add_argument("--option", type=_option_arg, action="append", default=[], metavar="NAME=VALUE",
+                   help="a threshold or budget of sorjax.Options (its docstring says what each does), repeatable: "
+                        "e.g. --option consistency_p=1e-3")
     c.set_defaults(func=_calibrate)
     e = sub.add_parser("experiment", help="run an experiment config (configs/*.toml)")
     e.add_argument("config", help="a TOML config file, or the name of one in configs/ (e.g. table1-quick)")

@@ -2,6 +2,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from sorjax import scenes
 from sorjax.cli import main
@@ -55,6 +56,13 @@ def test_cli_outline_error_option(tmp_path, capsys):
     capsys.readouterr()
     assert main(["calibrate", *files, "--outline-error", "1.0"]) == 1
     assert "too little perspective" in capsys.readouterr().err
+    # --option NAME=VALUE reaches sorjax.Options (here the perspective gate's z)
+    assert main(["calibrate", *files, "--outline-error", "0", "--option", "perspective_z=1e9"]) == 1
+    assert "needs z >= 1e+09" in capsys.readouterr().err
+    for bad in ("nonsense=1", "perspective_z", "perspective_z=abc"):
+        with pytest.raises(SystemExit) as e:
+            main(["calibrate", *files, "--option", bad])
+        assert e.value.code == 2 and "--option" in capsys.readouterr().err
     r = subprocess.run([sys.executable, "-m", "sorjax", "calibrate", *files, "--outline-error", "-1"],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 2 and "Traceback" not in r.stderr and "outline-error" in r.stderr
