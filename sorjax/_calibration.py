@@ -71,14 +71,13 @@ def view_homologies(homologies, n_samples: int, options: Options | None = None) 
             inl = np.ones(n_samples, bool)
         rms = float(h.rms)
         v, l = np.asarray(h.v_x, np.float64), np.asarray(h.l_s, np.float64)
+        at_infinity, is_conic = h.judged(o)
         return dict(
             v_x=v, l_s=l, W=np.asarray(h.W, np.float64), rms=np.float64(rms), cost=np.float64(float(h.cost)),
             rms_untrimmed=np.float64(rms if h.rms_untrimmed is None else float(h.rms_untrimmed)),
             conic_rms=np.float64(float(h.conic_rms)), trimmed=np.float64(h.trimmed),
             infinity_z=np.float64(np.inf if h.infinity_z is None else float(h.infinity_z)),
-            at_infinity=np.bool_(abs(float(v[2])) < 1e-9 or (h.infinity_z is not None
-                                                             and float(h.infinity_z) < o.infinity_z)),
-            is_conic=np.bool_(float(h.conic_rms) <= o.conic_ratio * rms + o.conic_floor_px),
+            at_infinity=np.bool_(at_infinity), is_conic=np.bool_(is_conic),
             converged=np.bool_(bool(h.converged)), steps=np.int32(int(h.steps)), inliers=inl,
             noise_ell=np.float64(np.nan if h.noise_ell is None else float(h.noise_ell)),
         )

@@ -273,8 +273,7 @@ class one_off_jit:
             with _LOCK:
                 if key in self._programs or key in self._pending:
                     return
-            exported, out_tree = self._load(key) or self._export(key, flat, in_tree, static)
-            call = jax.jit(exported.call, compiler_options=compiler_options())
+            call, _, out_tree = self._build(key, flat, in_tree, static)
             lowered = call.lower(*[jax.ShapeDtypeStruct(x.shape, x.dtype) for x in flat])
         except Exception:  # left to the call
             return

@@ -122,17 +122,22 @@ class Homology(eqx.Module):
         the outline (or a rough, densely sampled outline) it is optimistic, so the test
         errs towards calling ``v_x`` finite.  :func:`sorjax.calibrate` acts on it only
         when the joint estimate cannot fix the focal length either."""
-        if abs(float(np.asarray(self.v_x)[2])) < 1e-9:
-            return True
-        return self.infinity_z is not None and bool(self.infinity_z < Options().infinity_z)
+        return self.judged(Options())[0]
 
     @property
     def is_conic(self) -> bool:
         """The outline is explained by a conic about as well as by this homology
         (``conic_rms <= conic_ratio * rms + conic_floor_px``, :class:`sorjax.core.Options`):
         its homology is not determined, so the view says nothing about the camera."""
-        o = Options()
-        return bool(self.conic_rms <= o.conic_ratio * self.rms + o.conic_floor_px)
+        return self.judged(Options())[1]
+
+    def judged(self, options) -> tuple[bool, bool]:
+        """``(v_x_at_infinity, is_conic)`` by the thresholds of ``options`` (a
+        :class:`sorjax.Options`; the properties use the defaults)."""
+        at_inf = abs(float(np.asarray(self.v_x)[2])) < 1e-9 or (
+            self.infinity_z is not None and bool(self.infinity_z < options.infinity_z))
+        conic = bool(self.conic_rms <= options.conic_ratio * self.rms + options.conic_floor_px)
+        return at_inf, conic
 
 
 # The maths (sorjax.core._symmetry) and the per-view fit (sorjax.core._viewfit).
