@@ -15,7 +15,10 @@ child.)  Cases, on SIZE x SIZE px (default 20000):
   image-auto   the same, one disc of radius 0.03 SIZE (600 px) found automatically
   cli-mask     ``sorjax calibrate IMAGE --masks MASK --out camera.yaml`` on PNG files
                (uint8 BGR image, 8-bit mask) holding two discs: reading, extraction, the
-               (failed: discs are conics) calibration, the overlay
+               (failed: discs are conics) calibration, the overlay.  The command line
+               refuses images above 60 Mpx from their headers (exit 2, nothing decoded:
+               sorjax._image_files.MAX_IMAGE_PIXELS), so at the default size this case
+               measures that refusal; --size 7000 or less measures the whole run
 
 The issue's bound: under 2 GB for a 20000 x 20000 mask holding one small object.
 

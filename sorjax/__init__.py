@@ -12,6 +12,8 @@ _jax.config.update("jax_enable_x64", True)
 from ._calibration import RESULTS, Calibration, CalibrationError, calibrate  # noqa: E402
 from ._extract import outlines_from_image, outlines_from_mask  # noqa: E402
 from ._homology import Homology, fit_homology, homology_matrix  # noqa: E402
+from ._image_outline import ImageOutline  # noqa: E402
+from ._masks import MASK_OFFSET_PX  # noqa: E402
 from ._outline import Outline, make_outline  # noqa: E402
 from ._outline_files import load_outlines, save_outlines  # noqa: E402
 from ._uncertainty import ErrorPrediction, predicted_error  # noqa: E402
@@ -24,6 +26,8 @@ __all__ = [
     "CalibrationError",
     "ErrorPrediction",
     "Homology",
+    "ImageOutline",
+    "MASK_OFFSET_PX",
     "Options",
     "Outline",
     "calibrate",

@@ -34,8 +34,8 @@ from .core._result import RESULTS
 from .core._viewfit import ViewHomologies
 from ._messages import (_NAMES, _left_out_text, code_name, details_for, distortion_notes, dropped_views, model_notes,
                         verdict_notes, view_notes)
-from ._calibration_checks import (METHODS as METHODS, _check_arguments, _check_homologies, _check_views,
-                                  _outline_noise)
+from ._calibration_checks import (METHODS as METHODS, _check_arguments, _check_extent, _check_homologies,
+                                  _check_views, _outline_noise)
 from ._calibration_quality import (_grid_floor, _own_errors, dominant_view as dominant_view,
                                    measured_outline_error as measured_outline_error)
 from ._calibration_result import Calibration as Calibration, CalibrationError as CalibrationError, _calibration
@@ -151,7 +151,7 @@ def _run_core(points: np.ndarray, homs: ViewHomologies, method: str, aspect, opt
     program, a, kw = _core_call(points, homs, method, aspect, options, image_size, distortion, fixed, leave_out,
                                 noise, noise_ell)
     r = jax.tree_util.tree_map(np.asarray, program(*a, **kw))
-    per_view = ("used", "drop_reason", "view_rms", "v_x", "l_s")
+    per_view = ("used", "drop_reason", "view_rms", "v_x", "l_s", "outline_offset", "outline_offset_std")
     r = eqx.tree_at(lambda x: [getattr(x, k) for k in per_view], r, [getattr(r, k)[:V] for k in per_view])
     per_check = ("view_score", "view_px", "duplicate_of")
     return eqx.tree_at(lambda x: [getattr(x.checks, k) for k in per_check], r,
@@ -263,6 +263,10 @@ def calibrate(
     Args:
         outlines: one closed outline per view, each an (N, 2) array of pixel
             coordinates (OpenCV convention) or an :class:`Outline`; at least two.
+            A list (or tuple); a 3-D array (V, N, 2) is read as V outlines of N points.
+            One outline passed bare (an (N, 2) array) is refused, saying to wrap it in
+            a list.  Each needs at least ``sorjax._outline.MIN_POINTS`` (32) distinct
+            points.
         method: "bundle" (default: the joint 2V+4 estimator, or 2V+3 with a known
             aspect ratio, seeded by Method II; gives the covariance), "I" (zero skew,
             unit or known aspect ratio; eqs. 21-26), "IIa" (zero skew, free aspect
@@ -272,15 +276,23 @@ def calibrate(
         n_samples: samples per outline in the homology fit (eq. 20); None:
             ``options.n_samples`` (100, the paper's N, by default).
         n_points: resampled outline size for the distance fields.
-        homologies: optional precomputed per-view :class:`Homology` fits.
+        homologies: optional precomputed per-view :class:`Homology` fits.  Each is
+            checked against its outline (its symmetry residual there at most
+            ``Options.homology_ratio`` times its own ``rms``): one fitted on another
+            outline (another camera, another view) is refused with a ValueError naming
+            the view.
         outline_error: the systematic error (px RMS) the outlines may carry that their
             symmetry residual does not show (None: ``options.outline_error_px``, 0.1 px
             by default): segmentation bias, lens distortion, an
             object that is not quite a surface of revolution.  The bundle counts the
             focal length as determined only when the outlines show at least
             ``PERSPECTIVE_FACTOR`` (3) times this much perspective (see
-            ``Calibration.perspective_px``).  The default, 0.1 px, is about the
-            accuracy of good sub-pixel outlines of real objects; pass 0 for exact
+            ``Calibration.perspective_px``).  It is also the least prior standard
+            deviation of the outlines' shared offset along their normals, which the
+            bundle estimates as a nuisance and every method's standard deviations
+            include (``Options.outline_offset_px``; outlines traced from masks carry
+            ``MASK_OFFSET_PX``, 1 px: ``Calibration.outline_offset``).  The default,
+            0.1 px, is about the accuracy of good sub-pixel outlines of real objects; pass 0 for exact
             outlines with only random noise (synthetic studies).  ``"measured"``: taken
             from the outlines themselves (:func:`measured_outline_error`: the RMS over
             the views kept of each view's symmetry residual, at least the default) --
@@ -302,7 +314,9 @@ def calibrate(
             pixel grid raise it further (whole-pixel coordinates, staircases; a pixel
             trace as ``cv2.findContours`` gives is replaced by its binary mask's
             outline, :func:`sorjax.make_outline`, and counts as accurate as that).
-        image_size: ``(width, height)`` of the images in px, when known: an estimate
+        image_size: ``(width, height)`` of the images in px, when known; the outlines
+            must lie in it (within ``IMAGE_EDGE_TOLERANCE_PX``, 1 px, of its edge at
+            -0.5 and ``width - 0.5``: a ValueError names one that does not).  An estimate
             with the principal point outside the image, or a field of view above
             ``MAX_FOV_DEG`` (120 deg), is then reported as not determined (the outlines'
             errors made it, not their perspective).
@@ -404,10 +418,12 @@ def calibrate(
     n_samples = options.n_samples
     prepared = _as_outlines(outlines, n_points)
     outs, smoothed = [o for o, _ in prepared], [j for _, j in prepared]
+    _check_extent(outs, image_size)  # an image_size the outlines do not fit in, named before anything runs
     noise = _outline_noise(outline_noise, outlines, len(outs))
     noise_ell = _outline_noise(outline_noise_ell, outlines, len(outs), "outline_noise_ell", "noise_ell")
+    options = _with_outline_offset(options, outlines)
     aspect_ratio = _check_views(len(outs), per_outline, pp_fixed, f_fixed, aspect_ratio)
-    homologies = _check_homologies(homologies, len(outs))
+    homologies = _check_homologies(homologies, len(outs), outs, options)
     points = np.stack([np.asarray(o.points, np.float64) for o in outs])
     a = None if method in ("IIa",) or (method == "bundle" and aspect_ratio is None) else (
         1.0 if aspect_ratio is None else float(aspect_ratio)
@@ -444,6 +460,17 @@ def calibrate(
     if throw and not cal.success:
         raise CalibrationError(cal.message)
     return cal
+
+
+def _with_outline_offset(options: Options, outlines) -> Options:
+    """``options`` with ``outline_offset_px`` raised to the largest finite
+    ``outline_offset`` its outlines carry (:class:`sorjax.ImageOutline`: those traced
+    from masks)."""
+    own = [getattr(o, "outline_offset", math.nan) for o in outlines] if isinstance(outlines, (list, tuple)) else []
+    own = [float(x) for x in own if isinstance(x, (int, float)) and math.isfinite(x) and x >= 0]
+    if own and max(own) > options.outline_offset_px:
+        return dataclasses.replace(options, outline_offset_px=max(own))
+    return options
 
 
 def _measured(run, per_outline, floor_px: float, options: Options):

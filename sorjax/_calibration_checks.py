@@ -12,8 +12,9 @@ import math
 import numpy as np
 
 from ._checks import check_options, check_sizes
-from ._homology import Homology
+from ._homology import Homology, homology_residual
 from ._calibration_thresholds import OUTLINE_ERROR_PX
+from .core._options import Options
 
 METHODS = ("bundle", "I", "IIa", "IIb")
 
@@ -76,7 +77,18 @@ def _check_method(method: str, aspect_ratio):
             )
 
 
-def _check_homologies(homologies, n_views):
+def _check_homologies(homologies, n_views, outlines=None, options=None):
+    """``homologies`` (a sequence of :class:`Homology`, one per outline, or None)
+    checked: their type and number and, given ``outlines`` (the calibration's
+    :class:`sorjax.Outline` s, as resampled), that each maps its outline onto itself as
+    well as it claims: the outline's RMS symmetry residual under it
+    (:func:`sorjax._homology.homology_residual`: eq. 20 at the fit's samples, over the
+    samples it kept) at most ``options.homology_ratio`` times its own fitted residual
+    ``Homology.rms`` (at least ``options.check_floor_px``).  A homology fitted on the
+    outline gets back its own residual (ratio 1); one fitted on another outline (another
+    camera, view or object, the outline moved) maps this one onto itself worse than
+    its own, and would make K from geometry these outlines do not show.  A ValueError
+    names the first view that fails."""
     if homologies is not None:
         try:
             homologies = tuple(homologies)
@@ -96,7 +108,29 @@ def _check_homologies(homologies, n_views):
                     f"homologies[{i}] is a {type(h).__name__}, not a sorjax.Homology; "
                     "pass the results of sorjax.fit_homology (or homologies=None)."
                 )
+        if outlines is not None:
+            _check_homology_fit(homologies, outlines, Options() if options is None else options)
     return homologies
+
+
+def _check_homology_fit(homologies, outlines, options):
+    """Each homology maps its outline onto itself within its own residual (see
+    :func:`_check_homologies`); a ValueError naming the first view that does not."""
+    ratio, floor = float(options.homology_ratio), float(options.check_floor_px)
+    if not ratio < math.inf:
+        return
+    r = homology_residual(outlines, homologies, outlines[0].n_points, options)
+    for i, (h, ri) in enumerate(zip(homologies, r)):
+        own = float(h.rms)
+        lim = ratio * max(own, floor) if math.isfinite(own) else math.nan
+        if not ri <= lim:
+            raise ValueError(
+                f"view {i}: homologies[{i}] does not map its outline onto itself: the outline's RMS symmetry residual "
+                f"under it is {ri:.3g} px, against {own:.3g} px for the outline it was fitted on (Homology.rms); at "
+                f"most {lim:.3g} px is accepted (options.homology_ratio = {ratio:g} times that, taken as at least "
+                f"options.check_floor_px = {floor:g} px). It was fitted on another outline (another camera, view or "
+                "object, or the outline moved): pass the homologies fitted on these outlines (sorjax.fit_homology of "
+                "each, in the same order), or homologies=None.")
 
 
 _check_sizes = check_sizes  # n_samples, n_points: the same rules as fit_homology's (sorjax._checks)
@@ -208,3 +242,44 @@ def _check_views(n: int, per_outline, pp_fixed, f_fixed, aspect_ratio):
             "gives the focal length."
         )
     return aspect_ratio
+
+
+# How far (px) beyond the image's edge an outline may reach when image_size is given: the
+# image spans [-0.5, W - 0.5] x [-0.5, H - 0.5] (OpenCV: pixel centres 0 .. W - 1), an
+# outline traced along a border pixel's edge reaches -0.5 or W - 0.5 exactly, and its
+# smoothing and the resampling through its points (Catmull-Rom) may overshoot that by a
+# fraction of a pixel.  Beyond 1 px the outlines are not in that image's pixels.
+IMAGE_EDGE_TOLERANCE_PX = 1.0
+
+
+def _check_extent(outlines, image_size) -> None:
+    """The outlines (:class:`sorjax.Outline` s) lie inside ``image_size`` ``(w, h)``
+    (checked, or None: nothing to check), to within ``IMAGE_EDGE_TOLERANCE_PX`` of its
+    edge; a ValueError naming the outline that reaches furthest beyond it otherwise."""
+    if image_size is None or not outlines:
+        return
+    w, h = image_size
+    tol = IMAGE_EDGE_TOLERANCE_PX
+    lo = np.array([-0.5, -0.5]) - tol
+    hi = np.array([w - 0.5, h - 0.5]) + tol
+    pts = [np.asarray(o.points, np.float64) for o in outlines]
+    mins, maxs = np.array([p.min(axis=0) for p in pts]), np.array([p.max(axis=0) for p in pts])
+    over = np.maximum(np.max(maxs - hi, axis=1), np.max(lo - mins, axis=1))
+    if not np.any(over > 0):
+        return
+    i = int(np.argmax(over))
+    x0, y0 = mins.min(axis=0)
+    x1, y1 = maxs.max(axis=0)
+    where = ", ".join(f"{c} = {v:.1f}" for c, v, bad in (
+        ("x", mins[i, 0], mins[i, 0] < lo[0]), ("x", maxs[i, 0], maxs[i, 0] > hi[0]),
+        ("y", mins[i, 1], mins[i, 1] < lo[1]), ("y", maxs[i, 1], maxs[i, 1] > hi[1])) if bad)
+    span = f"the outlines span x = {x0:.1f} .. {x1:.1f}, y = {y0:.1f} .. {y1:.1f} px (outline {i} reaches {where})"
+    edge = (f"the {w} x {h} image's pixels run from -0.5 to {w - 0.5:g} in x and to {h - 0.5:g} in y (OpenCV: the "
+            f"top-left pixel's centre at (0, 0)), {tol:g} px of tolerance")
+    if x0 < lo[0] or y0 < lo[1]:
+        raise ValueError(f"the outlines reach beyond image_size {(w, h)}: {span}, left of or above the image; {edge}. "
+                         "Pass the outlines in the pixels of the image they were traced in, or image_size=None.")
+    swapped = x1 <= h - 0.5 + tol and y1 <= w - 0.5 + tol
+    raise ValueError(f"image_size {(w, h)} is smaller than the outlines' extent: {span}; {edge}. Pass the (width, "
+                     "height) of the images the outlines were traced in"
+                     + (f" (width first: {(h, w)} would hold them)" if swapped else "") + ", or image_size=None.")

@@ -75,6 +75,14 @@ class Calibration(eqx.Module):
         fixed_principal_point, fixed_focal_length: the intrinsics held fixed
             (``calibrate(principal_point=..., focal_length=...)``; px), None when
             estimated.  Their standard deviations are 0.
+        outline_offset, outline_offset_std: per used view (the order of ``used``), the
+            outline's systematic offset along its outward normals (px; positive: the
+            outline lies outside the object's true edge, a dilated mask) that the
+            bundle estimated as a nuisance, with the prior
+            :attr:`sorjax.Options.outline_offset_px` (or the outline error, or the
+            outlines' own ``outline_offset``, the largest): ``K`` has its effect
+            removed and the standard deviations include what is left of it.  NaN for
+            the linear methods (their standard deviations include the prior's effect).
     """
 
     K: Float[Array, "3 3"]
@@ -102,6 +110,8 @@ class Calibration(eqx.Module):
     distortion_std: Float[Array, " n"] | None = None
     fixed_principal_point: tuple[float, float] | None = eqx.field(static=True, default=None)
     fixed_focal_length: float | None = eqx.field(static=True, default=None)
+    outline_offset: Float[Array, " V"] | None = None
+    outline_offset_std: Float[Array, " V"] | None = None
 
     @property
     def std(self) -> np.ndarray:
@@ -153,5 +163,5 @@ def _calibration(r, homologies, method: str, a, details, left_out, notes, outlin
         tuple((i, left_out.get(i, why)) for i, why in dropped), tuple(notes), float(r.perspective_px),
         float(r.perspective_z), float(outline_error), jax.tree_util.tree_map(jnp.asarray, r.checks), distortion,
         None if n == 0 else jnp.asarray(r.distortion[:n]), None if n == 0 else jnp.asarray(r.distortion_std[:n]),
-        pp_fixed, f_fixed,
+        pp_fixed, f_fixed, jnp.asarray(r.outline_offset[r.used]), jnp.asarray(r.outline_offset_std[r.used]),
     )

@@ -24,7 +24,9 @@ def write_camera(cal, path, image_size: tuple[int, int], sources=()) -> tuple[Pa
     estimated radial ``cal.distortion`` (k1[, k2]) when it has one, else zeros (a
     pinhole camera); ``cv2.undistort(image, camera_matrix, distortion_coefficients)``
     uses them as they are.  The JSON also has ``distortion`` (``k1``, ``k2``) and
-    ``distortion_std`` (from ``cal.distortion_std``), null when not estimated."""
+    ``distortion_std`` (from ``cal.distortion_std``), null when not estimated, and per
+    used view the outlines' systematic offset the bundle estimated with its std
+    (``outline_offset_px``, ``outline_offset_std_px``: ``cal.outline_offset``)."""
     import cv2
 
     path, twin = camera_paths(path)
@@ -58,8 +60,15 @@ def write_camera(cal, path, image_size: tuple[int, int], sources=()) -> tuple[Pa
         distortion_coefficients=dist.tolist(),
         distortion=None if dist_std is None else dict(k1=float(dist[0]), k2=float(dist[1])),
         distortion_std=None if dist_std is None else dict(zip(("k1", "k2"), map(_finite_or_none, dist_std))),
+        outline_offset_px=_per_view(getattr(cal, "outline_offset", None)),
+        outline_offset_std_px=_per_view(getattr(cal, "outline_offset_std", None)),
     ), indent=1))
     return path, twin
+
+
+def _per_view(x):
+    """A per-used-view array as a JSON list (null entries where not finite), or None."""
+    return None if x is None else [_finite_or_none(v) for v in np.asarray(x, np.float64).ravel()]
 
 
 def camera_paths(path) -> tuple[Path, Path]:

@@ -59,6 +59,7 @@ import cv2
 import numpy as np
 
 from ._detect_options import DetectOptions
+from ._image_outline import ImageOutline
 from ._detect_proposals import _box_iou, _reduce, proposals  # noqa: F401
 from ._edge_refinement import (  # noqa: F401
     outline_homology, outline_quality, refine_to_edges, symmetric_average,
@@ -68,72 +69,6 @@ from ._symmetry_judge import (  # noqa: F401
 )
 
 __all__ = ["DetectOptions", "ImageOutline", "find_objects", "outline_quality", "refine_to_edges"]
-
-
-class ImageOutline(np.ndarray):
-    """An outline (N, 2) float64 array in pixels, with what the image said about it.
-
-    Attributes
-    ----------
-    outline_error : float
-        Estimated RMS distance (px) of the outline from the object's true edge,
-        from the data (see :mod:`sorjax._edge_refinement`'s "Edge refinement"); NaN
-        when the outline was not refined on the image.
-    edge_contrast : float
-        Median colour step (8-bit grey levels) across the accepted edge points.
-    accepted : float
-        Fraction of the outline's points whose edge was confirmed on the image.
-    symmetry_rms : float
-        RMS symmetry residual (px) of the robust harmonic homology fitted to the
-        refined outline, before it was averaged with its mirror image (without
-        refinement: to the segmentation's outline when the object was found
-        automatically, NaN with a box).
-    noise_rms : float
-        RMS symmetry residual (px) of the refined outline before it was averaged with
-        its own mirror image (:func:`symmetric_average`; NaN when it was not): the
-        noise that the averaged outline no longer shows, which :func:`sorjax.calibrate`
-        takes as each view's noise floor (its ``outline_noise``).
-    noise_ell : float
-        The correlation length along the curve (px) of that noise, read off the same
-        fit's residuals (:attr:`sorjax.Homology.noise_ell`; NaN when not averaged):
-        :func:`sorjax.calibrate`'s ``outline_noise_ell``.
-
-    Arithmetic returns plain arrays' values with these attributes copied; use
-    ``np.asarray(o)`` for a plain array."""
-
-    outline_error: float
-    edge_contrast: float
-    accepted: float
-    symmetry_rms: float
-    noise_rms: float
-    noise_ell: float
-
-    #: the attributes above, in order (what :func:`sorjax.save_outlines` keeps)
-    ATTRIBUTES = ("outline_error", "edge_contrast", "accepted", "symmetry_rms", "noise_rms", "noise_ell")
-
-    def __new__(cls, points, *, outline_error=math.nan, edge_contrast=math.nan, accepted=math.nan,
-                symmetry_rms=math.nan, noise_rms=math.nan, noise_ell=math.nan):
-        obj = np.asarray(points, dtype=np.float64).view(cls)
-        obj.outline_error = float(outline_error)
-        obj.edge_contrast = float(edge_contrast)
-        obj.accepted = float(accepted)
-        obj.symmetry_rms = float(symmetry_rms)
-        obj.noise_rms = float(noise_rms)
-        obj.noise_ell = float(noise_ell)
-        return obj
-
-    def __array_finalize__(self, obj):
-        for k in self.ATTRIBUTES:
-            setattr(self, k, getattr(obj, k, math.nan))
-
-    def __reduce__(self):  # pickles (worker processes) keep the attributes
-        base = super().__reduce__()
-        return base[0], base[1], (base[2], self.__dict__)
-
-    def __setstate__(self, state):
-        arr_state, attrs = state
-        super().__setstate__(arr_state)
-        self.__dict__.update(attrs)
 
 
 # ----------------------------------------------------------------------------------

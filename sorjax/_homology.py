@@ -253,3 +253,63 @@ def fit_homology(
     return Homology(l_s=h.l_s, v_x=h.v_x, W=h.W, rms=h.rms, cost=h.cost, converged=h.converged, steps=h.steps,
                     conic_rms=h.conic_rms, infinity_z=h.infinity_z, inliers=h.inliers,
                     rms_untrimmed=h.rms_untrimmed, noise_ell=h.noise_ell)
+
+
+@functools.partial(one_off_jit, static_argnames=("n_samples",))
+def _outline_residuals(points, v_x, l_s, n_samples):
+    """``(r, w)``: eq. 20's residuals (V, N) px of each outline ``points`` (V, M, 2 px)
+    under the homology ``(v_x, l_s)`` (V, 3 each, px), at the samples and with the corner
+    weights (V, N) of the per-view fit with ``n_samples`` samples (the same field, samples
+    and weights as :func:`fit_homology`'s, so that a homology fitted on the outline gets
+    back its own residuals).  One compiled program per shape."""
+    views = prepare_views(points, n_samples)
+    v = jnp.einsum("vij,vj->vi", views.T, v_x)  # points map by T, lines by T^-T
+    l = jnp.einsum("vji,vj->vi", jnp.linalg.inv(views.T), l_s)
+    r = jax.vmap(symmetry_residuals)(v, l, views.samples, views.fields, views.weights)
+    return r * views.scale[:, None], views.weights
+
+
+def homology_residual(outlines, homologies, n_points: int = DEFAULT_POINTS, options: Options | None = None
+                      ) -> np.ndarray:
+    """The RMS symmetry residual (px) of each outline under its given homology: how well
+    ``homologies[i]`` (a :class:`Homology`) maps ``outlines[i]`` onto itself, read as
+    :func:`fit_homology` reads its own fit (eq. 20 at the same samples: as many as the
+    homology's ``inliers``, else ``options.n_samples``; over the samples it kept; with
+    the fit's trimming rule, ``options.trim_k`` and ``options.trim_floor_px``, applied
+    once more, so that an outline with a handle is judged by the samples that have a
+    mirror image; ``options`` None: the defaults).  A homology fitted on this very
+    outline gives back its own ``rms``; one fitted on another outline (another camera,
+    view or object, the outline moved) more.  Returns (V,) px."""
+    options = Options() if options is None else options
+    outs = [make_outline(o, n_points) for o in outlines]
+    points = np.stack([np.asarray(o.points, np.float64) for o in outs])
+    out = np.full(len(outs), np.nan)
+    sizes = [options.n_samples if h.inliers is None else int(np.shape(h.inliers)[0]) for h in homologies]
+    for n in sorted(set(sizes)):
+        idx = [i for i, s in enumerate(sizes) if s == n]
+        B = max(4, 1 << (len(idx) - 1).bit_length())  # padded view counts: one program for 2 to 4 views, ...
+        pick = idx + [idx[0]] * (B - len(idx))
+        v = np.stack([np.asarray(homologies[i].v_x, np.float64) for i in pick])
+        l = np.stack([np.asarray(homologies[i].l_s, np.float64) for i in pick])
+        r, w = (np.asarray(a) for a in _outline_residuals(points[pick], v, l, n))
+        for j, i in enumerate(idx):
+            h = homologies[i]
+            keep = np.ones(n, bool) if h.inliers is None else np.asarray(h.inliers, bool)
+            out[i] = _kept_rms(r[j], w[j], keep, options)
+    return out
+
+
+def _kept_rms(r, w, keep, options: Options) -> float:
+    """RMS of the weighted residuals ``r * w`` (px) over the samples ``keep`` (the
+    homology's inliers) that the fit's trimming rule keeps (``max(trim_k * 1.4826
+    median|r|, trim_floor_px)``, never below half of them)."""
+    o = options
+    a = np.abs(r * w)
+    base = keep & (w > 0)
+    if not base.any():
+        return float("nan")
+    lim = max(o.trim_k * 1.4826 * float(np.median(a[base])), o.trim_floor_px)
+    kept = base & (a <= lim)
+    if kept.sum() < base.sum() // 2:
+        kept = base
+    return float(np.sqrt(np.sum(a[kept] ** 2) / np.sum(w[kept])))

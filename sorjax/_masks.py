@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from ._checks import number
+from ._image_outline import ImageOutline
 from ._level_trace import _clean_loop, _shoelace, _start_at_top, _trace_level, _tube_smooth, _unbend
 
 __all__ = ["outlines_from_mask"]
@@ -27,6 +28,13 @@ _BORDER_MODES = ("refuse", "cut", "raise")
 # more for a photograph's unmixing).
 _BLOCK = 8
 MAX_WINDOW_PIXELS = 60_000_000
+#: the standard deviation (px) of the systematic offset along the normals that an outline
+#: traced from a mask is taken to carry (:attr:`sorjax.ImageOutline.outline_offset`): a
+#: segmenter's mask is eroded or dilated by up to about a pixel (a matting threshold, a
+#: learned mask, a blurred edge), which the outline's symmetry does not show.  Chosen
+#: from measurement (experiments/outline_bias.py, docs/results.md): masks of photo-like
+#: renders eroded and dilated by 0.5, 1 and 2 px.
+MASK_OFFSET_PX = 1.0
 _CHUNK_ELEMENTS = 1 << 22  # elements per block of rows when a whole image is scanned
 
 
@@ -418,12 +426,15 @@ def outlines_from_mask(
 
     Returns
     -------
-    list of (N, 2) float64 arrays
+    list of (N, 2) float64 arrays (:class:`sorjax.ImageOutline`)
         One closed outline per object (connected region of the smoothed mask >= 0.5),
         largest area first, in pixels with the OpenCV convention: the centre of pixel
         ``(row i, column j)`` is ``(x, y) = (j, i)``.  No repeated end point, positive
         shoelace area (clockwise as displayed), starting at the top-most point, points
         evenly spaced 0.5 px apart.  Only the outer boundary: holes are ignored.  Never empty.
+        Each carries ``outline_offset = MASK_OFFSET_PX``: a mask from a segmenter may
+        be eroded or dilated by about a pixel, which :func:`sorjax.calibrate` counts in
+        the standard deviations (:attr:`sorjax.Options.outline_offset_px`).
 
     Raises
     ------
@@ -435,7 +446,8 @@ def outlines_from_mask(
     """
     min_area, smooth = _check_options(min_area, smooth, border)
     F = _as_field(mask, label)
-    return _outlines_from_field(F, min_area=min_area, smooth=smooth, border=border)
+    return [ImageOutline(p, outline_offset=MASK_OFFSET_PX)
+            for p in _outlines_from_field(F, min_area=min_area, smooth=smooth, border=border)]
 
 
 # ----------------------------------------------------------------------------------

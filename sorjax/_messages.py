@@ -243,9 +243,11 @@ def _worst_views(ch, k: int = 2) -> str:
 
 
 def _aspect_text(ch) -> str:
+    better = (f", and fit {float(ch.aspect_px):.2g} px RMS better" if np.isfinite(float(ch.aspect_px))
+              else " (Method IIa)")  # a linear method's check: no cost to compare
     return (f"aspect_ratio={float(ch.aspect_fixed):g} is not what the outlines show: with the aspect ratio free "
             f"they give fu / fv = {float(ch.aspect_free):.4f} +- {float(ch.aspect_free_std):.2g}, "
-            f"{float(ch.aspect_z):.3g} standard deviations away, and fit {float(ch.aspect_px):.2g} px RMS better")
+            f"{float(ch.aspect_z):.3g} standard deviations away{better}")
 
 
 def _views_text(ch) -> str:
@@ -297,11 +299,14 @@ def model_notes(r, outline_error: float, fixed=None, options: Options = _O) -> l
                                                                       "only_principal_point"):
         return []
     notes = []
-    if np.isfinite(float(ch.aspect_z)) and float(ch.aspect_z) >= options.consistency_z:
+    # (a linear method's aspect check has no cost to compare, aspect_px NaN, and its own threshold)
+    z_limit = options.consistency_z if np.isfinite(float(ch.aspect_px)) else options.linear_aspect_z
+    if np.isfinite(float(ch.aspect_z)) and float(ch.aspect_z) >= z_limit:
         notes.append(
             _aspect_text(ch) + f", within what the outline error allowed for ({float(outline_error):g} px) could "
             "cause. The standard deviations include the difference between the fixed and the free estimates; "
-            "if the aspect ratio is not known exactly, pass aspect_ratio=None.")
+            "if the aspect ratio is not known exactly, pass aspect_ratio=None (Methods I and IIb then take 1: "
+            "use the bundle or Method IIa).")
     if bool(ch.lens_rejected):
         notes.append(
             _lens_text(ch) + f", within what the outline error allowed for ({float(outline_error):g} px) could cause. "

@@ -26,7 +26,17 @@ from ._curves import _segments_cross, perimeter, resample_closed, signed_area  #
 from .core._field import gaussian_smooth_closed
 
 DEFAULT_POINTS = 2048
-MIN_POINTS = 10
+# The fewest distinct points an outline may have.  Measured (fit_homology on ellipses and
+# the exact silhouettes of vase, bottle, wine glass and candle holder, resampled to 3-40
+# points, rotated, with and without 0.3 px noise, 11 to 2200 px across): it failed
+# (FloatingPointError: the outline, smoothed as jagged, collapsed) up to 16 points at
+# 100-2000 px, 19 at 40 px and 25 at 11 px; it never failed from 26 points on.  32 keeps a
+# margin above that; a denser outline (every pixel of the contour) is what calibration needs.
+# A pixel trace (:func:`is_pixel_trace`, e.g. cv2.findContours with CHAIN_APPROX_SIMPLE, which
+# keeps only the ends of straight runs) may have fewer: it is replaced by its mask's dense
+# outline; it needs MIN_TRACE_POINTS to be recognised as one.
+MIN_POINTS = 32
+MIN_TRACE_POINTS = 10
 MIN_EXTENT_PX = 10.0
 # Pixel coordinates of any image lie well within this (a gigapixel panorama is ~1e5
 # px across); beyond it squared distances and areas lose all precision or overflow
@@ -55,7 +65,8 @@ def validate_points(points, *, name: str = "outline") -> np.ndarray:
     """Check a user's outline and return it as a clean (N, 2) float64 numpy array.
 
     Raises ValueError for: wrong shape or dtype, NaN/inf, coordinates beyond
-    ``MAX_COORDINATE_PX`` (1e7 px), fewer than 10 distinct points, a curve smaller than 10 px, an open curve, a point visited twice (a curve
+    ``MAX_COORDINATE_PX`` (1e7 px), fewer than ``MIN_POINTS`` (32) distinct points (unless a pixel trace,
+    :func:`is_pixel_trace`), a curve smaller than 10 px, an open curve, a point visited twice (a curve
     that touches itself or is traced more than once), a self-intersecting curve, zero
     area.
     """
@@ -83,7 +94,8 @@ def validate_points(points, *, name: str = "outline") -> np.ndarray:
     if arr.ndim == 3 and arr.shape[1] == 1 and arr.shape[2] == 2:  # OpenCV contour
         arr = arr[:, 0, :]
     if arr.ndim != 2 or arr.shape[1] != 2:
-        hint = " (it looks transposed: pass points.T)" if arr.ndim == 2 and arr.shape[0] == 2 else ""
+        hint = " (it looks transposed: pass points.T)" if arr.ndim == 2 and arr.shape[0] == 2 else (
+            f" ({arr.shape[0]} outlines? pass one at a time)" if arr.ndim == 3 and arr.shape[2] == 2 else "")
         raise ValueError(
             f"{name}: expected shape (N, 2), got {arr.shape}{hint}. "
             "An outline is one (x, y) pixel coordinate per row."
@@ -110,10 +122,10 @@ def validate_points(points, *, name: str = "outline") -> np.ndarray:
     arr = arr[keep]
     if len(arr) > 1 and np.all(arr[-1] == arr[0]):
         arr, rows = arr[:-1], rows[:-1]
-    if len(arr) < MIN_POINTS:
+    if len(arr) < MIN_POINTS and not is_pixel_trace(arr):
         raise ValueError(
-            f"{name}: has {len(arr)} distinct points; at least {MIN_POINTS} are needed. "
-            "Pass a densely sampled outline (e.g. every pixel of the contour)."
+            f"{name}: has {len(arr)} distinct points; at least {MIN_POINTS} are needed (fewer make the homology fit "
+            "fail). Pass a densely sampled outline (e.g. every pixel of the contour, or sorjax.outlines_from_mask)."
         )
     extent = float(np.max(np.ptp(arr, axis=0)))
     if extent < MIN_EXTENT_PX:
@@ -222,7 +234,7 @@ def is_pixel_trace(p: np.ndarray) -> bool:
     one of the eight chain-code directions (horizontal, vertical or diagonal) and most
     of them unit steps (``CHAIN_APPROX_NONE`` has only unit steps;
     ``CHAIN_APPROX_SIMPLE`` keeps the ends of straight runs)."""
-    if len(p) < MIN_POINTS or not np.all(p == np.round(p)):
+    if len(p) < MIN_TRACE_POINTS or not np.all(p == np.round(p)):
         return False
     d = np.abs(np.diff(np.vstack([p, p[:1]]), axis=0))
     if not np.all((d[:, 0] == 0) | (d[:, 1] == 0) | (d[:, 0] == d[:, 1])):
@@ -414,20 +426,32 @@ def implied_outline_error(points) -> tuple[float, str]:
     return QUANTISED_PX, "quantised"
 
 
-def _looks_like_one_outline(outlines) -> bool:
+def _one_outline_shape(outlines) -> tuple | None:
+    """The shape of ``outlines`` when it is one outline passed bare where a list of
+    outlines is expected: an :class:`Outline`, a 2-D array (N, 2) -- or (2, N),
+    transposed -- of any array type (numpy, JAX, ...), an OpenCV contour (N, 1, 2), or a
+    list of (x, y) pairs; else None.  A 3-D array (V, N, 2) is V outlines."""
     if isinstance(outlines, Outline):
-        return True
-    if isinstance(outlines, np.ndarray):
-        return outlines.ndim == 2 or (outlines.ndim == 3 and outlines.shape[1] == 1)
-    if isinstance(outlines, (list, tuple)) and len(outlines) >= MIN_POINTS:
+        return tuple(outlines.points.shape)
+    if outlines is None or isinstance(outlines, (str, bytes, dict)):
+        return None
+    shape = getattr(outlines, "shape", None)
+    if shape is not None and not isinstance(outlines, (list, tuple)):
+        try:
+            shape = tuple(int(n) for n in shape)
+        except (TypeError, ValueError):
+            return None
+        return shape if len(shape) == 2 or (len(shape) == 3 and shape[1:] == (1, 2)) else None
+    if isinstance(outlines, (list, tuple)) and len(outlines) > 0:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 arr = np.asarray(outlines)
         except Exception:
-            return False
-        return arr.dtype != object and arr.ndim == 2 and arr.shape[1] == 2 and np.issubdtype(arr.dtype, np.number)
-    return False
+            return None
+        if arr.dtype != object and arr.ndim == 2 and arr.shape[1] == 2 and np.issubdtype(arr.dtype, np.number):
+            return arr.shape
+    return None
 
 
 def as_outlines(outlines, n_points: int = DEFAULT_POINTS) -> list[Outline]:
@@ -438,10 +462,15 @@ def as_outlines(outlines, n_points: int = DEFAULT_POINTS) -> list[Outline]:
 def _as_outlines(outlines, n_points: int) -> list[tuple[Outline, tuple[float, float] | None]]:
     """:func:`as_outlines`, each outline with its ``(jitter, left)`` where it was
     smoothed as jagged (:func:`_make_outline`), without warnings (the caller notes)."""
-    if _looks_like_one_outline(outlines):
+    shape = _one_outline_shape(outlines)
+    if shape is not None:
+        kind = "list" if isinstance(outlines, list) else "tuple" if isinstance(outlines, tuple) else "array"
+        bare = "an Outline" if isinstance(outlines, Outline) else f"a bare {kind} of shape {shape}"
+        transposed = len(shape) == 2 and shape[0] == 2 and shape[1] != 2
         raise ValueError(
-            "expected a list of outlines (one per view), got a single outline. "
-            "Wrap it in a list; note that calibration needs at least two views."
+            f"expected a list of outlines (one per view), got a single outline. Wrap it in a list: pass "
+            f"{'[outline.T] (it looks transposed)' if transposed else '[outline]'}, not {bare}; calibration needs at "
+            "least two views (or one with principal_point fixed)."
         )
     if outlines is None or isinstance(outlines, (str, bytes, dict)):
         hint = {

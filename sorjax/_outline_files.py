@@ -55,9 +55,13 @@ def load_outlines(path) -> list[ImageOutline]:
     their attributes (NaN where none was saved).  A ValueError says what is wrong with a
     file that is not one."""
     what = f"{os.fspath(path)}: not an outline file written by sorjax.save_outlines"
+    if not os.path.isfile(path):
+        raise ValueError(f"{os.fspath(path)}: no such file")
+    if os.path.getsize(path) == 0:
+        raise ValueError(f"{what} (the file is empty)")
     try:
         z = np.load(path, allow_pickle=False)
-    except Exception:  # noqa: BLE001  (empty, truncated, text, pickled: the user's file to fix)
+    except Exception:  # noqa: BLE001  (truncated, text, pickled: the user's file to fix)
         raise ValueError(f"{what} (not a .npz archive numpy can read)") from None
     if not isinstance(z, np.lib.npyio.NpzFile):
         raise ValueError(f"{what} (a single array, not a .npz archive of outlines)")

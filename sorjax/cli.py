@@ -9,7 +9,9 @@ attributes), calibrates,
 prints K with its standard deviations and a per-view table, and with ``--out`` writes
 an OpenCV YAML, a JSON twin and overlay images.  Errors in the input are reported in one line with
 exit code 2, never a traceback; an image that gives no outline is dropped with a one-line warning and
-the run goes on with the others.  Outlines found in photographs (no ``--masks``), and outline files
+the run goes on with the others.  Images are files of any format OpenCV reads (by suffix, or by
+content for other suffixes than an outline file's: :mod:`sorjax._image_files`); one above 60 Mpx
+is refused from its header, before it is decoded.  Outlines found in photographs (no ``--masks``), and outline files
 of :func:`sorjax.save_outlines` whose outlines carry an ``outline_error`` (every outline of the run
 then), are calibrated with the outline error measured from the outlines
 (``calibrate(outline_error="measured")``).
@@ -30,39 +32,62 @@ from pathlib import Path
 
 import numpy as np
 
+from . import _image_files
+
 
 def _read_outlines(path: str) -> list[np.ndarray]:
     """The outlines of one outline file: one from ``.npy`` or text, every one of a
-    :func:`sorjax.save_outlines` ``.npz`` (with their attributes)."""
+    :func:`sorjax.save_outlines` ``.npz`` (with their attributes); each checked as
+    :func:`sorjax.calibrate` checks outlines (at least ``MIN_POINTS`` points, closed,
+    ...), the message naming the file.  An empty or unreadable file is a one-line
+    ValueError (numpy's "input contained no data" warning caught, not printed)."""
+    from ._image_files import opencv_reads
+    from ._outline import validate_points
+
     p = Path(path)
     if not p.is_file():
         raise ValueError(f"{path}: no such file")
-    if p.suffix.lower() == ".npz":
+    if p.suffix.lower() == ".npz":  # an empty one: "not an outline file written by sorjax.save_outlines (...)"
         from ._outline_files import load_outlines
 
-        return load_outlines(p)
-    try:
-        if p.suffix.lower() == ".npy":
-            return [np.load(p)]
-        delim = "," if p.suffix.lower() == ".csv" else None
-        return [np.loadtxt(p, delimiter=delim, ndmin=2)]
-    except Exception as e:  # unreadable files are the user's to fix
-        raise ValueError(f"{path}: could not read an (N, 2) array of pixel coordinates ({e})") from None
+        read = load_outlines(p)
+    elif p.stat().st_size == 0:
+        raise ValueError(f"{path}: the file is empty; an outline file holds one outline, x y pixel coordinates "
+                         "(a row per point, as text or .npy), or the outlines of sorjax.save_outlines (.npz)")
+    else:
+        try:
+            with warnings.catch_warnings(record=True):  # loadtxt's "input contained no data": said below
+                warnings.simplefilter("always")
+                if p.suffix.lower() == ".npy":
+                    read = [np.load(p, allow_pickle=False)]
+                else:
+                    read = [np.loadtxt(p, delimiter="," if p.suffix.lower() == ".csv" else None, ndmin=2)]
+        except Exception as e:  # unreadable files are the user's to fix
+            if opencv_reads(p):
+                raise ValueError(f"{path}: an image (by its content), not an outline file: give it its image "
+                                 "suffix (.png, .jpg, ...) to calibrate from the photograph") from None
+            raise ValueError(f"{path}: could not read an (N, 2) array of pixel coordinates "
+                             f"({' '.join(str(e).split())})") from None
+        if not isinstance(read[0], np.ndarray):  # np.load of a zip: an .npz archive under another suffix
+            read[0].close()
+            raise ValueError(f"{path}: an .npz archive, not one array: name it .npz if sorjax.save_outlines wrote it, "
+                             "or save one outline per file with np.save")
+        if read[0].size == 0:
+            raise ValueError(f"{path}: holds no numbers (only blank lines or comments); an outline file holds x y "
+                             "pixel coordinates, a row per point")
+    for k, o in enumerate(read):
+        validate_points(o, name=path if len(read) == 1 else f"{path}: outline {k}")
+    return read
 
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
+# every format OpenCV's imread reads (sorjax._image_files): .png, .jpg, .ppm, .pfm, .exr, .hdr, ...
+IMAGE_SUFFIXES = _image_files.IMAGE_SUFFIXES
 
 
 def _read_image(path: str, flags) -> np.ndarray:
-    import cv2
-
-    p = Path(path)
-    if not p.is_file():
-        raise ValueError(f"{path}: no such file")
-    img = cv2.imread(str(p), flags)
-    if img is None:
-        raise ValueError(f"{path}: not an image OpenCV can read")
-    return img
+    """``cv2.imread(path, flags)``, its size first read from the file's header and refused
+    above ``sorjax._image_files.MAX_IMAGE_PIXELS`` before anything is decoded."""
+    return _image_files.read_image(path, flags)
 
 
 def _read_boxes(path: str | None, images: list[str]) -> list:
@@ -257,6 +282,9 @@ def _views_from_images(args, labels: list[str]):
 
     if args.masks and len(args.masks) != len(args.outlines):
         raise ValueError(f"--masks needs one mask per image: {len(args.outlines)} images, {len(args.masks)} masks")
+    for f in [*args.outlines, *(args.masks or [])]:  # every size from its header before any image is decoded
+        if Path(f).is_file():
+            _image_files.check_image_size(f)
     boxes = _read_boxes(args.boxes, args.outlines)
     outlines, sources, images, size, dropped = [], [], [], None, []
     for k, f in enumerate(args.outlines):
@@ -408,7 +436,7 @@ def _calibrate(args) -> int:
     # so that only a machine's first run pays for them (experiments do the same)
     enable_compilation_cache()
 
-    is_image = [Path(f).suffix.lower() in IMAGE_SUFFIXES for f in args.outlines]
+    is_image = [_image_files.is_image_file(f) for f in args.outlines]  # by suffix, else by content
     if any(is_image) and not all(is_image):
         raise ValueError("give either images or outline files (.npy/.txt/.csv/.npz), not both")
     if not any(is_image) and (args.masks or args.boxes):
@@ -602,7 +630,7 @@ def main(argv=None) -> int:
     try:
         return args.func(args)
     except (ValueError, OSError) as e:  # the user's input or the file system: one line, never a traceback
-        print(f"sorjax: error: {e}", file=sys.stderr)
+        print(f"sorjax: error: {' '.join(str(e).splitlines())}", file=sys.stderr)
         return 2
 
 

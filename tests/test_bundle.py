@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import sorjax
+from sorjax.core._options import Options
 from sorjax import losses, scenes
 from sorjax.core._model import (BundleProblem, axis_params, intrinsic_params, pole_polar_pairs, residuals)
 from sorjax.core._bundle import solve
@@ -131,6 +132,7 @@ def test_noise_floor_raises_the_level_only_where_it_binds(scene):
     ``n_j noise_j^2``, in the residual variance and in the covariance's noise level
     (which scales with it); a floor of zero is no floor; the residuals (the estimate)
     do not depend on it."""
+    exact = Options(outline_error_px=0.0)  # no offset prior: every share of the covariance scales with the noise
     import dataclasses
 
     from sorjax.core._covariance import (covariance, floored_rss, residual_variance)
@@ -141,10 +143,10 @@ def test_noise_floor_raises_the_level_only_where_it_binds(scene):
     r = residuals(y, prob)
     rss = np.sum(np.asarray(r).reshape(prob.weights.shape) ** 2, axis=1)
     n = np.asarray(jnp.sum(prob.weights, axis=1))
-    c0 = covariance(y, prob, jnp.eye(3))
+    c0 = covariance(y, prob, jnp.eye(3), options=exact)
     V = len(outs)
     zero = dataclasses.replace(prob, noise=jnp.zeros(V))
-    np.testing.assert_allclose(np.asarray(covariance(y, zero, jnp.eye(3))[0]), np.asarray(c0[0]), rtol=1e-10)
+    np.testing.assert_allclose(np.asarray(covariance(y, zero, jnp.eye(3), options=exact)[0]), np.asarray(c0[0]), rtol=1e-10)
     floor = np.zeros(V)
     floor[0] = 3.0 * np.sqrt(rss[0] / n[0])
     high = dataclasses.replace(prob, noise=jnp.asarray(floor))
@@ -153,7 +155,7 @@ def test_noise_floor_raises_the_level_only_where_it_binds(scene):
     np.testing.assert_allclose(float(jax.jit(floored_rss)(r, high)), want, rtol=1e-12)
     np.testing.assert_allclose(float(residual_variance(r, y, high)) / float(residual_variance(r, y, prob)),
                                want / rss.sum(), rtol=1e-12)
-    c1 = covariance(y, high, jnp.eye(3))
+    c1 = covariance(y, high, jnp.eye(3), options=exact)
     np.testing.assert_allclose(float(c1[1]) / float(c0[1]), want / rss.sum(), rtol=1e-12)
     np.testing.assert_allclose(np.asarray(c1[0]), np.asarray(c0[0]) * want / rss.sum(), rtol=1e-9)
     np.testing.assert_array_equal(np.asarray(c1[3]), np.asarray(c0[3]))  # the correlation length: the residuals'
@@ -162,13 +164,13 @@ def test_noise_floor_raises_the_level_only_where_it_binds(scene):
     # their residuals alone)
     ell0 = float(c0[3][0])
     given = jnp.asarray([4.0 * ell0, 0.25 * ell0, 0.25 * ell0])
-    c2 = covariance(y, dataclasses.replace(high, noise_ell=given), jnp.eye(3))
+    c2 = covariance(y, dataclasses.replace(high, noise_ell=given), jnp.eye(3), options=exact)
     assert float(c2[3][0]) == pytest.approx(4.0 * ell0, rel=0.1)
     assert float(c2[3][1]) == float(c2[3][2]) != pytest.approx(0.25 * ell0, rel=0.1)
     assert float(c2[1]) == pytest.approx(float(c1[1]), rel=1e-12)  # s2 does not depend on the length
     assert not np.allclose(np.asarray(c2[0]), np.asarray(c1[0]), rtol=1e-3)
     # a length given where no floor binds changes nothing
-    c3 = covariance(y, dataclasses.replace(prob, noise=jnp.zeros(V), noise_ell=given), jnp.eye(3))
+    c3 = covariance(y, dataclasses.replace(prob, noise=jnp.zeros(V), noise_ell=given), jnp.eye(3), options=exact)
     np.testing.assert_allclose(np.asarray(c3[0]), np.asarray(c0[0]), rtol=1e-10)
 
 

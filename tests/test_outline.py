@@ -33,7 +33,7 @@ def test_closing_duplicate_and_opencv_layout_accepted():
     "bad, words",
     [
         (np.zeros((0, 2)), "empty"),
-        (ellipse()[:5], "at least 10"),
+        (ellipse()[:5], "at least 32"),
         (np.where(np.arange(300)[:, None] == 7, np.nan, ellipse()), "NaN"),
         (ellipse().T, "transposed"),
         (ellipse()[:150], "open curve"),

@@ -99,7 +99,7 @@ class Verdict(eqx.Module):
 
 
 def assess(est, cov_unit, s_px, radius, extent, image_size, free_aspect, floor_verdict, perspective_ok,
-           options: Options, single_view=False) -> Verdict:
+           options: Options, single_view=False, cov_offset=None) -> Verdict:
     """Which of the raw estimate ``est = (fu, fv, u0, v0)`` (px) the views determine,
     from the covariance per px^2 of residual ``cov_unit`` (4, 4) and the residual
     standard error ``s_px``.  An intrinsic is determined when its std is finite and at
@@ -111,11 +111,15 @@ def assess(est, cov_unit, s_px, radius, extent, image_size, free_aspect, floor_v
     free) the std is taken at a residual of at least ``residual_floor_px``, so the
     estimate must fix the focal length robustly to override that.  Nothing is
     determined without enough evidence for perspective (``perspective_ok``) or for an
-    implausible estimate (:func:`implausible`)."""
+    implausible estimate (:func:`implausible`).  ``cov_offset`` (4, 4) px^2: a part of
+    the covariance that does not scale with the residuals (the declared outline
+    offset's, :func:`sorjax.core._covariance.offset_meat`), added to both; None: none."""
+    off = jnp.zeros((4, 4)) if cov_offset is None else cov_offset
     var = jnp.diag(cov_unit)
     s_floor = jnp.maximum(s_px, options.residual_floor_px)
-    std = jnp.where(jnp.isfinite(var), jnp.sqrt(jnp.abs(var)), jnp.inf) * s_px
-    std_floor = std / jnp.maximum(s_px, 1e-300) * s_floor
+    fin = jnp.isfinite(var)
+    std = jnp.where(fin, jnp.sqrt(jnp.abs(jnp.where(fin, var, 0.0)) * s_px**2 + jnp.diag(off)), jnp.inf)
+    std_floor = jnp.where(fin, jnp.sqrt(jnp.abs(jnp.where(fin, var, 0.0)) * s_floor**2 + jnp.diag(off)), jnp.inf)
     judged = jnp.where(floor_verdict, std_floor, std)
     why = implausible(est, extent, image_size, options)
     focal_frac = jnp.where(single_view, options.focal_undetermined, options.undetermined)
@@ -126,9 +130,10 @@ def assess(est, cov_unit, s_px, radius, extent, image_size, free_aspect, floor_v
     rel_floor = std_floor[:2] / jnp.abs(est[:2])
     all_det = jnp.all(determined)
     weak = jnp.where(all_det & (jnp.max(rel_floor) > options.weak_rel_std), jnp.max(rel_floor), jnp.nan)
-    q = (cov_unit[0, 0] / est[0] ** 2 + cov_unit[1, 1] / est[1] ** 2 - 2 * cov_unit[0, 1] / (est[0] * est[1]))
+    C = cov_unit * s_floor**2 + off  # at the floor
+    q = (C[0, 0] / est[0] ** 2 + C[1, 1] / est[1] ** 2 - 2 * C[0, 1] / (est[0] * est[1]))
     aspect_weak = free_aspect & jnp.where(
-        ~all_det, True, jnp.isfinite(weak) & (jnp.sqrt(jnp.maximum(q, 0.0)) * s_floor > options.weak_rel_std))
+        ~all_det, True, jnp.isfinite(weak) & (jnp.sqrt(jnp.maximum(q, 0.0)) > options.weak_rel_std))
     return Verdict(determined, std, weak, aspect_weak, why)
 
 

@@ -27,7 +27,8 @@ from ._solvers import (Method, Solved, computed_as, is_stale, least_squares, pic
 from ._options import Options
 from ._model import (BundleProblem, axis_params, checked_residuals, fixed_chart, foot_parameters, make_problem,
                      pack_seeds, pin_intrinsics, residuals, solution_in_pixels, split_params, with_model)
-from ._covariance import LIN_VIEWS, Linearisation, covariance, linearise, step_sigmas
+from ._camera import intrinsics_matrix, omega_matrix, omega_vector_from_intrinsics
+from ._covariance import LIN_VIEWS, Linearisation, OutlineOffsets, covariance, linearise, step_sigmas
 
 
 def _hinted_residuals(y, args):
@@ -222,7 +223,7 @@ def fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Optio
 
 
 def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Options, T):
-    """:func:`fit_bundle`, :func:`covariance`'s ``(cov, s2, ell)`` (``T`` the normalising
+    """:func:`fit_bundle`, :func:`covariance`'s ``(cov, s2, ell, offsets)`` (``T`` the normalising
     similarity) at the ``y`` returned, and the no-perspective reference fit from it
     (:func:`orthographic_cost`).
 
@@ -232,8 +233,8 @@ def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Opti
     (:func:`sorjax.core._solvers.polish_traced`) for both.  Every polished seed's
     covariance is computed in the loop (its Gauss-Newton step is the stationarity test
     of :func:`_converged`), so that the bundle's program holds one covariance, not two.
-    ``(cov, s2, ell)`` is NaN when no seed was tried (never: :func:`bundle_seeds` always
-    gives one).  Returns ``(y, ok, steps, residuals, (cov, s2, ell), (cost_o, y_o), lin)``:
+    ``(cov, s2, ell, offsets)`` is NaN when no seed was tried (never: :func:`bundle_seeds` always
+    gives one).  Returns ``(y, ok, steps, residuals, (cov, s2, ell, offsets), (cost_o, y_o), lin)``:
     ``cost_o`` the reference's cost (normalised units^2) at its solution ``y_o`` (the
     chart of :func:`orthographic_problem` at ``y``); ``steps`` counts the seeds' steps;
     ``lin`` the :class:`Linearisation` at ``y`` that the covariance read (the model
@@ -256,7 +257,10 @@ def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Opti
     n_cov = 4 + problem.n_dist
     gn, lm = _SOLVERS["gn"], _SOLVERS["lm"]
     SEED, REFERENCE, DONE = 0, 1, 2
-    nan_cov = (jnp.full((n_cov, n_cov), jnp.nan), jnp.asarray(jnp.nan), jnp.asarray(jnp.nan), jnp.full(V, jnp.nan))
+    nan_off = OutlineOffsets(cov=jnp.full((n_cov, n_cov), jnp.nan), shift=jnp.full(n_cov, jnp.nan),
+                             value=jnp.full(V, jnp.nan), std=jnp.full(V, jnp.nan))
+    nan_cov = (jnp.full((n_cov, n_cov), jnp.nan), jnp.asarray(jnp.nan), jnp.asarray(jnp.nan), jnp.full(V, jnp.nan),
+               nan_off)
     N = problem.weights.shape[1]
     nan_lin = Linearisation(J=jnp.full((n_res, LIN_VIEWS + 4 * V), jnp.nan), r=jnp.full(n_res, jnp.nan),
                             a=jnp.full((V, N), jnp.nan), feet=jnp.full((V, N), jnp.nan))
@@ -278,18 +282,18 @@ def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Opti
             lin = linearise(y_end, problem, feet)
             return covariance(y_end, problem, T, feet, options, lin), lin
 
-        (cov, s2, step, ell), lin = jax.lax.cond(seed, at_solution, lambda: (nan_cov, nan_lin))
+        (cov, s2, step, ell, off), lin = jax.lax.cond(seed, at_solution, lambda: (nan_cov, nan_lin))
         y, ok, cost = _converged(final, problem, step)
         better = seed & (~have | (best_bad & ok) | ((best_bad == ~ok) & (cost < best_cost)))
         more = (i + 1 < S) & ~ok & seed_ok[order[jnp.minimum(i + 1, S - 1)]]
         nxt = jnp.where(seed, jnp.where(more, SEED, REFERENCE), DONE)
         return (i + seed, nxt, have | seed, jnp.where(better, ~ok, best_bad), jnp.where(better, cost, best_cost),
-                pick(better, y, best_y), pick(better, final.out, best_r), pick(better, (cov, s2, ell), best_cov),
+                pick(better, y, best_y), pick(better, final.out, best_r), pick(better, (cov, s2, ell, off), best_cov),
                 total + jnp.where(seed, steps, 0), pick(seed, ref, (final.cost, y_end)), pick(better, lin, best_lin))
 
     init = (jnp.asarray(0, jnp.int32), jnp.where(seed_ok[order[0]], SEED, REFERENCE), jnp.asarray(False),
             jnp.asarray(True), jnp.asarray(jnp.inf), (ks[order[0]], a0), jnp.full(n_res, jnp.nan),
-            (jnp.full((n_cov, n_cov), jnp.nan), jnp.asarray(jnp.nan), jnp.full(V, jnp.nan)),
+            (jnp.full((n_cov, n_cov), jnp.nan), jnp.asarray(jnp.nan), jnp.full(V, jnp.nan), nan_off),
             jnp.asarray(0, jnp.int32), (jnp.asarray(jnp.nan), (ks[order[0]], a0)), nan_lin)
     _, _, _, bad, _, y, r, cov, total, ref, lin = jax.lax.while_loop(lambda c: c[1] != DONE, body, init)
     return y, ~bad, total, r, cov, ref, lin
@@ -380,6 +384,13 @@ class BundleOut(eqx.Module):
             for a masked view.
         cov: (4, 4) covariance of ``(fu, fv, u0, v0)`` (px^2; inf / NaN where the
             views do not determine an intrinsic, :func:`covariance`).
+        cov_offset: (4, 4) the part of ``cov`` the outlines' systematic offset
+            makes (px^2; :func:`sorjax.core._covariance.offset_fit`, its prior
+            :func:`sorjax.core._covariance.outline_offset`): it does not scale with the
+            residuals.
+        offset, offset_std: (V,) each outline's systematic offset along its outward
+            normals estimated as a nuisance, and its std (px; NaN: masked); ``K`` has
+            its effect removed.
         s2: the residual variance ``|r|^2 / (n - p)`` (px^2).
         cost: the sum of squared residuals (px^2).
         view_rms: (V,) each view's RMS residual over its ``N`` samples (NaN: masked).
@@ -399,6 +410,9 @@ class BundleOut(eqx.Module):
     v_x: Float[Array, "V 3"]
     l_s: Float[Array, "V 3"]
     cov: Float[Array, "4 4"]
+    cov_offset: Float[Array, "4 4"]
+    offset: Float[Array, " V"]
+    offset_std: Float[Array, " V"]
     s2: Float[Array, ""]
     cost: Float[Array, ""]
     view_rms: Float[Array, " V"]
@@ -475,13 +489,18 @@ def bundle_estimate(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, opt
     return bundle_solution(points_n, used, inliers, l_n, seeds, seed_ok, aspect, T, options, fixed, base)[0]
 
 
+def _cov_s2_shift(c):
+    """``(cov, s2, offsets.shift)`` of :func:`covariance`'s result."""
+    return c[0], c[1], c[4].shift
+
+
 def _solved(y, problem: BundleProblem, T, used, steps, ok, options: Options, given=None):
     """A solver's end ``y`` as a :class:`BundleOut` (its ``evidence`` NaN, for the
     caller to fill) and the covariance of every intrinsic parameter (px; with
     distortion the coefficients follow): the fixed entries pinned, the optimum made
     differentiable (:func:`implicit_solution`), the residuals in pixels.
 
-    ``given``: ``((cov, s2, ell), r)``, :func:`covariance`'s ``(cov, s2, ell)`` and the
+    ``given``: ``((cov, s2, ell, offsets), r)``, :func:`covariance`'s ``(cov, s2, ell, offsets)`` and the
     whole-outline :func:`residuals` at ``y`` as the solver computed them (on
     ``stop_gradient`` inputs: :func:`_fit_bundle`), or None (computed here).  Given, they
     are made differentiable by :func:`sorjax.core._solvers.computed_as` instead of traced a
@@ -489,21 +508,29 @@ def _solved(y, problem: BundleProblem, T, used, steps, ok, options: Options, giv
     y = (pin_params(y[0], problem), y[1])
     y = implicit_solution(y, problem)
     if given is None:
-        cov, s2, _, ell = covariance(y, problem, T, None, options)
+        cov, s2, _, ell, off = covariance(y, problem, T, None, options)
         r = residuals(y, problem)
     else:
-        (cov, s2, ell), r = given
-        cov, s2 = computed_as((cov, s2), lambda y, p, T, o: covariance(y, p, T, None, o)[:2], y, problem, T, options)
+        (cov, s2, ell, off), r = given
+        cov, s2, shift = computed_as((cov, s2, off.shift), lambda y, p, T, o: _cov_s2_shift(covariance(y, p, T, None, o)),
+                                     y, problem, T, options)
+        off = eqx.tree_at(lambda o: o.shift, off, shift)
         r = computed_as(r, residuals, y, problem)
     ell = jax.lax.stop_gradient(ell)
+    off = eqx.tree_at(lambda o: (o.cov, o.value, o.std), off, jax.lax.stop_gradient((off.cov, off.value, off.std)))
     K, omega, vx, ls = solution_in_pixels(y, problem, T)
+    # the outlines' offset estimated as a nuisance (:func:`sorjax.core._covariance.offset_fit`): its effect removed
+    d = off.shift[:4]
+    K = intrinsics_matrix(K[0, 0] + d[0], K[1, 1] + d[1], K[0, 2] + d[2], K[1, 2] + d[3])
+    omega = omega_matrix(omega_vector_from_intrinsics(K[0, 0], K[1, 1], K[0, 2], K[1, 2]))
     scale = 1.0 / T[0, 0]
     rv = r.reshape(used.shape[0], -1) * scale  # the solver's, differentiable
     nan = jnp.asarray(jnp.nan)
     out = BundleOut(
         y=y, K=K, omega=omega,
         v_x=jnp.where(used[:, None], vx, nan), l_s=jnp.where(used[:, None], ls, nan),
-        cov=cov[:4, :4], s2=s2 * scale**2, cost=jnp.sum(rv**2),
+        cov=cov[:4, :4], cov_offset=off.cov[:4, :4], offset=jnp.where(used, off.value, nan),
+        offset_std=jnp.where(used, off.std, nan), s2=s2 * scale**2, cost=jnp.sum(rv**2),
         view_rms=jnp.where(used, jnp.sqrt(jnp.mean(rv**2, axis=1)), nan),
         steps=steps, ok=ok & jnp.all(jnp.isfinite(K)), evidence=nan, n=jnp.sum(problem.weights), noise_ell=ell,
     )

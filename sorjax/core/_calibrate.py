@@ -22,16 +22,17 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ._distorted import (DISTORTION_MODELS, bundle_estimate_distorted, distortion_gate)
-from ._model import (BundleProblem, make_problem)
+from ._model import BundleProblem, axis_params, make_problem, pack_seeds, with_model
 from ._bundle import (bundle_seeds, bundle_solution)
-from ._covariance import linearised_covariance
+from ._covariance import homology_covariance, homology_estimator_covariance
 from ._camera import intrinsics_matrix, transform_points
 from ._linear import linear_estimate
 from ._assess import (DUPLICATE, USED, assess, axes_intersection, outline_extent, outline_radius,
                       principal_point_determined,
                       perspective_gate, view_verdicts)
 from ._checks import (CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, CULPRIT_VIEWS, MODEL_CONTRADICTED, MODEL_OK,
-                      MODEL_WIDENED, NO_CULPRIT, ModelChecks, consistency, duplicate_views, fixed_aspect_check,
+                      MODEL_WIDENED, NO_CULPRIT, ModelChecks, aspect_of, consistency, duplicate_views,
+                      fixed_aspect_check,
                       fixed_release, lens_release, n_free_intrinsics, view_scores)
 from ._options import Options
 from ._prepare import joint_transform, prepare_views
@@ -211,10 +212,32 @@ def _linear_aspect(method: str, aspect):
     return jnp.asarray(jnp.nan) if method == "IIa" else jnp.where(jnp.isnan(aspect), 1.0, aspect)
 
 
-def _linear_cov(c: _Common, K, a_m, options: Options):
-    finite = jnp.all(jnp.isfinite(K))
-    return linearised_covariance(c.points_n, c.used, c.inliers, c.l_n, jnp.where(finite, K, jnp.eye(3)), c.T, a_m,
-                                 options.n_samples, base=c.problem, options=options)
+def _homology_cov(c: _Common, homs: ViewHomologies, K, a_m, options: Options):
+    """:func:`sorjax.core._covariance.homology_covariance` of the views' fits,
+    linearised at the estimate ``K`` (px; the identity where not finite) and the
+    fitted axes."""
+    Kn = c.T @ jnp.where(jnp.all(jnp.isfinite(K)), K, jnp.eye(3))
+    k = pack_seeds(jnp.stack([Kn[0, 0], Kn[1, 1], Kn[0, 2], Kn[1, 2]])[None], jnp.ones(1, bool))[0]
+    l_n = jnp.where(c.used[:, None], c.l_n, jnp.asarray([1.0, 0.0, 0.0]))
+    return homology_covariance((k, axis_params(l_n)), with_model(c.problem, a_m), c.T, options)
+
+
+def _linear_cov(c: _Common, homs: ViewHomologies, hc, K, a_m, method: str):
+    """The covariance (px^2) of a linear method's own estimate ``K``: its first-order
+    propagation from every view's homology fit (``hc``, :func:`_homology_cov`) through
+    the method, differentiated by autodiff
+    (:func:`sorjax.core._covariance.homology_estimator_covariance`).  NaN where ``K``
+    is not finite.  Returns ``(cov, cov_offset)``, the second the part the declared
+    outline offset makes."""
+    v_n = jnp.where(c.used[:, None], homs.v_x @ c.T.T, jnp.asarray([0.0, 0.0, 1.0]))
+    T_inv = jnp.linalg.inv(c.T)
+
+    def estimate(v, l):  # normalised homologies -> the method's (fu, fv, u0, v0) px
+        return _intrinsics(linear_estimate(v @ T_inv.T, l @ c.T, c.used, c.T, a_m, method=method)[0])
+
+    cov, cov_off = homology_estimator_covariance(estimate, v_n, hc)
+    good = jnp.all(jnp.isfinite(K)) & jnp.all(jnp.isfinite(cov))
+    return jnp.where(good, cov, jnp.nan), jnp.where(good, cov_off, 0.0)
 
 
 def _check_fixed(fixed):
@@ -290,7 +313,13 @@ def calibrate_homologies(points: Float[Array, "V M 2"], homs: ViewHomologies, me
         return _finish(points, homs, c, method, aspect, image_size, options, bundle=b, free=free, fixed=fixed)
     a_m = _linear_aspect(method, aspect)
     K, omega, ok = linear_estimate(homs.v_x, homs.l_s, c.used, c.T, a_m, method=method)
-    return _finish(points, homs, c, method, aspect, image_size, options, linear=(K, omega, ok, _linear_cov(c, K, a_m, options)))
+    hc = _homology_cov(c, homs, K, a_m, options)
+    free = None
+    if method != "IIa":  # the aspect ratio it imposes, checked against Method IIa's
+        Kf, _, okf = linear_estimate(homs.v_x, homs.l_s, c.used, c.T, jnp.nan, method="IIa")
+        free = (Kf, okf, _linear_cov(c, homs, hc, Kf, jnp.nan, "IIa"))
+    return _finish(points, homs, c, method, aspect, image_size, options,
+                   linear=(K, omega, ok, _linear_cov(c, homs, hc, K, a_m, method), a_m, free))
 
 
 def calibrate_methods(points: Float[Array, "V M 2"], homs: ViewHomologies, methods: tuple[str, ...], aspects,
@@ -318,9 +347,21 @@ def calibrate_methods(points: Float[Array, "V M 2"], homs: ViewHomologies, metho
     if il:
         a_ms = jnp.stack([_linear_aspect(methods[i], aspects[i]) for i in il])
         ests = [linear_estimate(homs.v_x, homs.l_s, c.used, c.T, a_ms[j], method=methods[i]) for j, i in enumerate(il)]
+        # one covariance of the views' fits for every linear method, linearised at the
+        # first finite estimate (the point moves it to second order only)
         Ks = jnp.stack([e[0] for e in ests])
-        covs = jax.lax.map(lambda ka: _linear_cov(c, ka[0], ka[1], options), (Ks, a_ms))
-        lin = {i: ests[j] + (covs[j],) for j, i in enumerate(il)}
+        first = jnp.argmax(jnp.all(jnp.isfinite(Ks), axis=(1, 2)))
+        hc = _homology_cov(c, homs, Ks[first], a_ms[first], options)
+        covs = [_linear_cov(c, homs, hc, ests[j][0], a_ms[j], methods[i]) for j, i in enumerate(il)]
+        free = None
+        if any(methods[i] != "IIa" for i in il):  # Method IIa's estimate checks the aspect ratio the others impose
+            j = next((j for j, i in enumerate(il) if methods[i] == "IIa"), None)
+            if j is None:
+                Kf, _, okf = linear_estimate(homs.v_x, homs.l_s, c.used, c.T, jnp.nan, method="IIa")
+                free = (Kf, okf, _linear_cov(c, homs, hc, Kf, jnp.nan, "IIa"))
+            else:
+                free = (ests[j][0], ests[j][2], covs[j])
+        lin = {i: ests[j] + (covs[j], a_ms[j], None if methods[i] == "IIa" else free) for j, i in enumerate(il)}
     out = []
     for i, m in enumerate(methods):
         if m == "bundle":
@@ -385,8 +426,9 @@ def _model_checks(out, scores, free_fit, aspect, c: _Common, options: Options, f
 
 
 def _no_checks(aspect, c: _Common, options: Options) -> ModelChecks:
-    """The checks of a linear method's estimate: none run (the bundle's result has
-    them), duplicates found."""
+    """The checks of an estimate none were run on (the bundle's own model checks,
+    :func:`_model_checks`, need its cost and Jacobian): duplicates found; a linear
+    method's aspect check is added by :func:`_linear_checks`."""
     nan = jnp.asarray(jnp.nan)
     V = c.used.shape[0]
     return ModelChecks(
@@ -399,11 +441,41 @@ def _no_checks(aspect, c: _Common, options: Options) -> ModelChecks:
         culprit=jnp.asarray(NO_CULPRIT, jnp.int32), duplicate_of=c.duplicate_of)
 
 
+def _linear_checks(a_m, K, cov, free, c: _Common, options: Options):
+    """The model check of a linear method that imposes an aspect ratio ``a_m`` (Method
+    I, IIb): Method IIa's estimate with the aspect ratio free (``free``: ``(K, ok,
+    (cov, cov_offset))`` px) puts ``fu / fv`` at ``a_free +- a_std`` (its own
+    first-order covariance); ``z = |a_free - a_m| / a_std >= linear_aspect_z`` rejects
+    ``a_m``, and the covariance is then widened by ``d d^T`` (``d`` the difference
+    between the two estimates' ``(fu, fv, u0, v0)``: the outlines cannot tell which
+    is right), the verdict :data:`MODEL_WIDENED` with the aspect ratio to blame (as the
+    bundle's check, :func:`sorjax.core._checks.fixed_aspect_check`, without its cost
+    comparison: a linear method has none).  Returns ``(checks, cov)``."""
+    checks = _no_checks(a_m, c, options)
+    if free is None:
+        return checks, cov
+    Kf, okf, (covf, _) = free
+    checked = okf & jnp.all(jnp.isfinite(Kf)) & jnp.isfinite(a_m) & jnp.all(jnp.isfinite(K))
+    a_free, a_std = aspect_of(Kf, covf)
+    z = jnp.abs(a_free - a_m) / jnp.maximum(a_std, 1e-300)
+    rejected = checked & (z >= options.linear_aspect_z)
+    d = jnp.where(rejected, _intrinsics(K) - _intrinsics(Kf), 0.0)
+    nan = jnp.asarray(jnp.nan)
+    checks = eqx.tree_at(
+        lambda ch: (ch.aspect_free, ch.aspect_free_std, ch.aspect_z, ch.verdict, ch.culprit), checks,
+        (jnp.where(checked, a_free, nan), jnp.where(checked, a_std, nan), jnp.where(checked, z, nan),
+         jnp.where(rejected, MODEL_WIDENED, MODEL_OK).astype(jnp.int32),
+         jnp.where(rejected, CULPRIT_ASPECT, NO_CULPRIT).astype(jnp.int32)))
+    return checks, cov + jnp.outer(d, d)
+
+
 def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image_size, options: Options, bundle=None,
             linear=None, free=None, distortion=None, fixed=None) -> CoreResult:
     """The verdicts and the result of one method's estimate (``bundle``: a
     :class:`sorjax.core._bundle.BundleOut` and its views' scores, ``free`` the same of the
-    free-aspect fit; ``linear``: ``(K, omega, ok, cov_unit)``; ``fixed``: the
+    free-aspect fit; ``linear``: ``(K, omega, ok, (cov, cov_offset), a_m, free)``, the
+    covariances px^2, ``a_m`` the aspect ratio the method imposes (NaN: IIa) and
+    ``free`` Method IIa's ``(K, ok, (cov, cov_offset))`` or None; ``fixed``: the
     intrinsics the bundle held fixed, px, or None)."""
     if linear is not None:
         fixed = None
@@ -424,7 +496,8 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
         else:
             checks, cov = _model_checks(out, scores, free, aspect, c, options, fixed)
         s_px = jnp.sqrt(out.s2)
-        cov_unit = cov / jnp.maximum(s_px, 1e-300) ** 2
+        cov_off = out.cov_offset
+        offset, offset_std = out.offset, out.offset_std
         persp_ok, g_px, z = perspective_gate(out.evidence, out.n, s_px, options)
         if fixed is not None:  # a fixed focal length needs no evidence for perspective
             persp_ok = persp_ok | focal_fixed
@@ -432,8 +505,8 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
         code = RESULTS.where(ok & jnp.all(jnp.isfinite(K)), RESULTS.successful, RESULTS.not_converged)
         assessed = jnp.all(jnp.isfinite(K)) & (K[0, 0] > 0) & (K[1, 1] > 0)
     else:
-        K, omega, ok, cov_unit = linear
-        cov = _nan((4, 4))
+        K, omega, ok, (cov, cov_off), a_m, free_lin = linear
+        offset = offset_std = jnp.full(used.shape[0], jnp.nan)
         floor = c.problem.noise
         rms = homs.rms if floor is None else jnp.maximum(homs.rms, floor / c.T[0, 0])  # (the floors in px)
         s_px = jnp.sqrt(jnp.sum(jnp.where(used, rms, 0.0) ** 2) / jnp.maximum(n_used, 1))
@@ -443,7 +516,7 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
         code = RESULTS.where(ok, RESULTS.successful,
                              RESULTS.degenerate if method == "I" else RESULTS.not_positive_definite)
         assessed = ok & finite & (K[0, 0] > 0) & (K[1, 1] > 0)
-        checks = _no_checks(aspect, c, options)
+        checks, cov = _linear_checks(a_m, K, cov, free_lin, c, options)
 
     if distortion is None:
         nan = jnp.asarray(jnp.nan)
@@ -452,8 +525,9 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
         dist_k, dist_std, dist_g, dist_z = distortion
     est = _intrinsics(K)
     rms_radius = jnp.sqrt(jnp.sum(jnp.where(used, radius**2, 0.0)) / jnp.maximum(n_used, 1))
-    verdict = assess(est, cov_unit, s_px, rms_radius,
-                     outline_extent(points, used), image_size, free_aspect, all_inf, persp_ok, options, n_used == 1)
+    cov_unit = (cov - cov_off) / jnp.maximum(s_px, 1e-300) ** 2  # the part that scales with the residuals
+    verdict = assess(est, cov_unit, s_px, rms_radius, outline_extent(points, used), image_size, free_aspect, all_inf,
+                     persp_ok, options, n_used == 1, cov_offset=cov_off)
     determined = verdict.determined & assessed
     success = code == RESULTS.successful
 
@@ -519,6 +593,7 @@ def _finish(points, homs: ViewHomologies, c: _Common, method: str, aspect, image
         perspective_px=jnp.asarray(g_px, jnp.float64), perspective_z=jnp.asarray(z, jnp.float64),
         perspective_ok=jnp.asarray(persp_ok), axes_spread_deg=spread, checks=checks,
         distortion=dist_k, distortion_std=dist_std, distortion_px=dist_g, distortion_z=dist_z,
+        outline_offset=offset, outline_offset_std=offset_std,
     )
 
 

@@ -14,7 +14,7 @@ that the covariance and every model check (:mod:`sorjax.core._checks`) read.
 from __future__ import annotations
 
 import dataclasses
-import functools
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -29,8 +29,8 @@ from ._noise import (NoiseGeometry, estimate_noise, jacobian_and_normal_sensitiv
                      noise_meat, sample_normals, smoothed_outline, unit_blocks)
 from ._solvers import NULL_RCOND
 from ._options import Options
-from ._model import (BundleProblem, axis_params, foot_parameters, make_problem, n_params, pack_seeds, pin_intrinsics,
-                     pixel_params, pole_polar_pairs, residuals, unpack_intrinsics, with_model)
+from ._model import (BundleProblem, foot_parameters, n_params, pin_intrinsics,
+                     pixel_params, pole_polar_pairs, residuals, unpack_intrinsics)
 
 
 NULL_EIGENVALUE = NULL_RCOND**2  # 1e-12: the Gauss-Newton polish takes no step where this calls null
@@ -175,10 +175,14 @@ def project_out(A, B):
 def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Options(), lin=None):
     """Covariance of the pixel intrinsics ``(fu, fv, u0, v0)`` at ``y`` (followed by
     ``(k1[, k2])`` with distortion, :func:`pixel_params`); returns
-    ``(cov, s2, step, ell)`` with ``s2 = |r|^2 / (VN - p)`` (normalised units^2;
+    ``(cov, s2, step, ell, offsets)`` with ``s2 = |r|^2 / (VN - p)`` (normalised units^2;
     each view's share at least its noise floor, :func:`floored_rss`),
-    ``step`` the Gauss-Newton step's Mahalanobis length (:func:`step_sigmas`) and
-    ``ell`` (V,) each view's outline noise correlation length (px, :mod:`sorjax.core._noise`).
+    ``step`` the Gauss-Newton step's Mahalanobis length (:func:`step_sigmas`),
+    ``ell`` (V,) each view's outline noise correlation length (px, :mod:`sorjax.core._noise`)
+    and ``offsets`` the outlines' systematic offset estimated as a nuisance
+    (:class:`OutlineOffsets`, :func:`offset_fit`): its share of ``cov`` (px^2; 0 where
+    ``cov`` is not finite), which does not scale with the residuals, and the shift of
+    the intrinsics it makes, which the caller adds to the estimate.
 
     The sandwich ``F^-1 G^T Sigma_r G F^-1`` of least squares, with
     ``Sigma_r`` the residuals' covariance under the outline noise model of
@@ -198,6 +202,13 @@ def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Optio
     standard deviations 0.89x the RMS error with the noisy Jacobian, 0.93x smoothed by
     6 px, 0.96x with the noise-free outlines' Jacobian; RMS error and residuals are
     those of the unsmoothed outlines).
+
+    A systematic offset of the outlines along their normals (an eroded or dilated
+    mask), with the declared prior :func:`outline_offset`, is estimated as a nuisance
+    to first order (:func:`offset_fit`): where perspective makes it visible its effect
+    on the intrinsics (their change per unit offset, implicit differentiation through
+    the solve) is removed, and what is left of it (its estimate's uncertainty, or the
+    prior where it is not visible) widens the covariance.
 
     A direction with eigenvalue below ``NULL_EIGENVALUE`` times the largest is not
     determined by the views at all (e.g. the focal length when every ``v_x`` is at
@@ -229,18 +240,133 @@ def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Optio
     geo = noise_geometry_at(smooth, feet_s, scale, a_s)
     ell, level = estimate_noise(geo, r.reshape(geo.a.shape), J, options.noise_ell_min_px, options.noise_ell_max_px,
                                 floor=view_floors(problem), floor_ell=problem.noise_ell)
-    meat = level * noise_meat(G, unit_blocks(geo, ell))
-    cov_k = F_inv @ meat @ F_inv
+    fit = offset_fit(G, Js, geo, r, s2, outline_offset(options) * T[0, 0])
+    meat_off = fit.meat
+    cov_k = F_inv @ (level * noise_meat(fit.G, unit_blocks(geo, ell)) + meat_off) @ F_inv
 
     Gk = jax.jacfwd(lambda k: pixel_params(k, problem, T))(y[0])
     cov = Gk @ cov_k @ Gk.T
+    cov_off = Gk @ F_inv @ meat_off @ F_inv @ Gk.T
+    shift = Gk @ (F_inv @ fit.score)
     GU = Gk @ U  # (4 [+ n_dist], nk): each pixel intrinsic along each eigenvector
     leak = jnp.sum(jnp.where(null[None, :], GU**2, 0.0), axis=1)
     undetermined = leak > 1e-8 * jnp.sum(GU**2, axis=1)
     bad = undetermined[:, None] | undetermined[None, :]
     cov = jnp.where(bad, jnp.nan, cov)
     cov = jnp.where(jnp.eye(cov.shape[0], dtype=bool) & bad, jnp.inf, cov)
-    return cov, s2, step, ell
+    off = OutlineOffsets(cov=jnp.where(bad, 0.0, cov_off), shift=jnp.where(undetermined, 0.0, shift),
+                         value=fit.value * scale, std=fit.std * scale)
+    return cov, s2, step, ell, off
+
+
+def outline_offset(options: Options):
+    """The standard deviation (px) of the systematic outline offset the covariance
+    counts: the larger of :attr:`Options.outline_offset_px` and
+    :attr:`Options.outline_error_px` (the declared systematic error of the outlines
+    is at least an offset of that size)."""
+    return jnp.maximum(options.outline_offset_px, options.outline_error_px)
+
+
+#: the prior standard deviation of each outline's own offset, as a fraction of the
+#: shared one's (:func:`offset_fit`).  0: one offset shared by every outline (one
+#: segmenter's bias).  Measured (experiments/outline_bias.py, five cameras of renders,
+#: masks eroded or dilated by 0 to 2 px): with own offsets as large as the shared one
+#: every run was covered as well, but the std of unbiased masks was 3.4x the
+#: offset-free one instead of 2.2x, and the errors' median |z| 0.56 instead of 0.73.
+OWN_OFFSET_SHARE = 0.0
+
+
+class OutlineOffsets(eqx.Module):
+    """The outlines' systematic offset along their normals, estimated with the bundle
+    (:func:`offset_fit`) and its effect on the intrinsics.
+
+    Attributes:
+        cov: (n, n) the part of the covariance of the pixel intrinsics that the
+            offset's uncertainty makes (px^2; it does not scale with the residuals).
+        shift: (n,) the change of the pixel intrinsics that the estimated offset makes
+            (px; already in the estimate the bundle reports).
+        value: (V,) each outline's estimated offset (px, outward positive: a dilated
+            mask): the shared part plus its own.
+        std: (V,) its standard deviation (px).
+    """
+
+    cov: Float[Array, "n n"]
+    shift: Float[Array, " n"]
+    value: Float[Array, " V"]
+    std: Float[Array, " V"]
+
+
+class _OffsetFit(NamedTuple):
+    G: Array
+    meat: Array
+    score: Array
+    value: Array
+    std: Array
+
+
+def offset_columns(geo: NoiseGeometry) -> Float[Array, "VN P"]:
+    """``B`` (V N, 1 + V): the residuals' change per unit offset of every outline
+    along its outward normals (the shared part, the first column) and of each
+    outline's own (one column per view): ``a - w`` on the view's rows (this module's
+    noise model with ``n(t)`` constant: the sample moves with the outline, ``a``, and
+    so does the target curve, ``-w``)."""
+    V, N = geo.a.shape
+    own = ((geo.a - geo.w)[:, :, None] * jnp.eye(V)[:, None, :]).reshape(V * N, V)
+    return jnp.concatenate([jnp.sum(own, axis=1, keepdims=True), own], axis=1)
+
+
+def offset_fit(G, J, geo: NoiseGeometry, r, s2, sigma) -> _OffsetFit:
+    """The outlines' systematic offset estimated as a nuisance of the bundle with a
+    prior: offsets ``delta`` (a part shared by every outline and one per outline,
+    :func:`offset_columns` ``B``), ``N(0, Lambda)`` (:func:`offset_prior`, normalised
+    units; ``sigma`` the declared :func:`outline_offset`), fitted to first order at the bundle's optimum
+    with the residuals ``r`` (white, variance ``s2``)::
+
+        delta = H B_P^T r,   H = (B_P^T B_P + s2 Lambda^-1)^-1
+
+    (``B_P``: ``B`` with the span of the bundle's Jacobian ``J`` projected out).
+    Where perspective makes the offset visible (``B_P^T B_P`` above ``s2 / sigma^2``)
+    it is estimated from the outlines and its effect removed; where not, the prior
+    holds it near 0 and its uncertainty widens the covariance.  The intrinsics move by
+    ``F^-1 G^T B delta`` (``score``: ``G^T B delta``) and their error is, to first
+    order, ``F^-1 (G_eff^T eps + N delta_true)`` with ``G_eff = G - B_P H B^T G`` (what
+    the noise ``eps`` reaches them through) and ``N = G^T B (I - H B_P^T B_P)`` (what
+    is left of the true offset): the meat ``N Lambda N^T`` here, the noise's read
+    off ``G_eff``.  ``sigma = 0``: nothing estimated, ``G_eff = G``, no meat.
+
+    Returns ``G_eff``, the offset's meat, the score, and each outline's offset (shared
+    plus own) with its standard deviation (the posterior's, normalised units)."""
+    B = offset_columns(geo)
+    P = B.shape[1]
+    B_P = project_out(B, J)
+    BPB = B_P.T @ B_P
+    eye = jnp.eye(P)
+    prior = offset_prior(sigma, P - 1)  # Lambda's diagonal
+    # H = (B_P^T B_P + s2 Lambda^-1)^-1 = Lambda (B_P^T B_P Lambda + s2 I)^-1 (no inverse of Lambda)
+    H = prior[:, None] * jnp.linalg.inv(BPB * prior[None, :] + jnp.maximum(s2, 1e-300) * eye)
+    H = 0.5 * (H + H.T)
+    delta = H @ (B_P.T @ r)
+    GB = G.T @ B
+    N = GB @ (eye - H @ BPB)
+    post = jnp.maximum(s2, 0.0) * H  # the offsets' posterior covariance (white noise)
+    u = jnp.concatenate([jnp.ones((P - 1, 1)), jnp.eye(P - 1)], axis=1)  # each outline: shared + own
+    return _OffsetFit(G=G - B_P @ (H @ GB.T), meat=(N * prior[None, :]) @ N.T, score=GB @ delta, value=u @ delta,
+                      std=jnp.sqrt(jnp.maximum(jnp.einsum("vp,pq,vq->v", u, post, u), 0.0)))
+
+
+def offset_prior(sigma, V: int):
+    """(1 + V,) the prior variances of the offsets of :func:`offset_columns`: ``sigma^2``
+    for the shared one, ``(OWN_OFFSET_SHARE sigma)^2`` for each outline's own."""
+    return sigma**2 * jnp.concatenate([jnp.ones(1), jnp.full(V, OWN_OFFSET_SHARE**2)])
+
+
+def offset_meat(G: Float[Array, "VN q"], geo: NoiseGeometry, sigma) -> Float[Array, "q q"]:
+    """``G^T B Lambda B^T G``: the meat of the outlines' systematic offset with its
+    prior (:func:`offset_columns` ``B``, :func:`offset_prior` ``Lambda``; ``sigma`` in
+    normalised units) for an estimator that does not estimate it (the linear methods):
+    ``F^-1 G^T B`` is the estimate's change per unit offset."""
+    GB = G.T @ offset_columns(geo)
+    return (GB * offset_prior(sigma, geo.a.shape[0])[None, :]) @ GB.T
 
 
 def noise_blocks(problem: BundleProblem, feet, T, ell, s2, a) -> Float[Array, "V N N"]:
@@ -318,21 +444,83 @@ def step_sigmas(y, problem: BundleProblem):
     return _step_length(J, r, residual_variance(r, y, problem))
 
 
-@functools.partial(jax.jit, static_argnames=("n_samples",))
-def linearised_covariance(points_n, used, inliers, l_n, K, T, aspect, n_samples: int, base=None,
-                          options: Options = Options()):
-    """Covariance of ``(fu, fv, u0, v0)`` per px^2 of symmetry residual for an estimate
-    ``K`` (px): :func:`covariance` at ``K`` with the per-view axes ``l_n`` (normalised)
-    -- how well the used views determine the intrinsics whatever the estimator
-    (infinite where they don't).  Pure; arguments as :func:`bundle_estimate`'s
-    (``base`` its shared problem, or None)."""
-    used = jnp.asarray(used, bool)
-    problem = make_problem(points_n, n_samples, aspect, inliers, used) if base is None else with_model(base, aspect)
-    Kn = T @ K
-    k = pack_seeds(jnp.stack([Kn[0, 0], Kn[1, 1], Kn[0, 2], Kn[1, 2]])[None], jnp.ones(1, bool))[0]
-    l = jnp.where(used[:, None], jnp.asarray(l_n, jnp.float64), jnp.asarray([1.0, 0.0, 0.0]))
-    cov, s2, _, _ = covariance((k, axis_params(l)), problem, T, None, options)
-    return cov / (jnp.maximum(s2, 1e-300) / T[0, 0] ** 2)
+class HomologyCovariance(eqx.Module):
+    """The covariance of every view's homology fit (eq. 20, each view alone), in four
+    parameters per view: its axis ``(theta, rho)`` (``l ~ (cos theta, sin theta,
+    -rho)``, normalised) and its vertex moved along ``b1``, ``b2``, two unit directions
+    orthogonal to it (the columns of :func:`linearise`).
+
+    Attributes:
+        cov: (4 V, 4 V) every view's axes first, then every view's vertex directions
+            (normalised units^2); block diagonal but for the shared outline offset.
+        cov_offset: the part of ``cov`` the declared outline offset makes
+            (:func:`offset_meat`).
+        axes: (V, 2) the fitted axes ``(theta, rho)``.
+        b1, b2: (V, 3) the vertex directions.
+        s2: the residual variance of the fit with every homology free (normalised
+            units^2).
+    """
+
+    cov: Float[Array, "P P"]
+    cov_offset: Float[Array, "P P"]
+    axes: Float[Array, "V 2"]
+    b1: Float[Array, "V 3"]
+    b2: Float[Array, "V 3"]
+    s2: Float[Array, ""]
+
+
+def homology_covariance(y, problem: BundleProblem, T, options: Options = Options()) -> HomologyCovariance:
+    """:class:`HomologyCovariance` under this module's outline noise model and the
+    declared outline offset (:func:`offset_meat`): each view's block of the sandwich
+    ``F^-1 J^T Sigma_r J F^-1``, read off the outlines smoothed as :func:`covariance`
+    does, linearised at ``y = (k, a)`` (the views' vertices there,
+    :func:`pole_polar_pairs`, and the fitted axes ``a``).  The noise level and
+    correlation length are matched (:func:`sorjax.core._noise.estimate_noise`) to the
+    residuals with every view's homology free, to first order (the residuals at ``y``
+    with the homologies' columns projected out), each view's floor included."""
+    k, a = y
+    V = a.shape[0]
+    scale = 1.0 / T[0, 0]
+    cols = jnp.concatenate([lin_axis_columns(V).reshape(-1), lin_vertex_columns(V).reshape(-1)])
+    raw = linearise(y, problem)
+    Jh = raw.J[:, cols]
+    r = raw.r - Jh @ jnp.linalg.lstsq(Jh, raw.r, rcond=NULL_RCOND)[0]  # the free homologies' residuals, first order
+    dof = jnp.maximum(jnp.sum(problem.weights) - 4 * jnp.sum(problem.used), 1)
+    smooth = smoothed_problem(problem, options.covariance_smooth_px, scale)
+    lin = linearise(y, smooth)
+    G = lin.J[:, cols]
+    geo = noise_geometry_at(smooth, lin.feet, scale, lin.a)
+    ell, level = estimate_noise(geo, r.reshape(geo.a.shape), Jh, options.noise_ell_min_px, options.noise_ell_max_px,
+                                floor=view_floors(problem), floor_ell=problem.noise_ell)
+    meat_off = offset_meat(G, geo, outline_offset(options) * T[0, 0])
+    meat = level * noise_meat(G, unit_blocks(geo, ell)) + meat_off
+    F_inv = jnp.linalg.pinv(G.T @ G, hermitian=True)  # block diagonal: each view's own fit
+    v0 = pole_polar_pairs((pin_intrinsics(k, problem.fixed), a), dataclasses.replace(problem, fixed=None))[0]
+    b1, b2 = jax.vmap(_vertex_basis)(jax.lax.stop_gradient(v0))
+    return HomologyCovariance(cov=F_inv @ meat @ F_inv, cov_offset=F_inv @ meat_off @ F_inv, axes=a, b1=b1, b2=b2,
+                              s2=floored_rss(r, problem) / dof)
+
+
+def homology_estimator_covariance(estimate, v_n, hc: HomologyCovariance):
+    """First-order covariance ``A C A^T`` of an estimator of the pixel intrinsics that
+    reads only the per-view homologies, ``(fu, fv, u0, v0) = estimate(v, l)`` px with
+    ``v, l`` (V, 3) normalised (the paper's linear methods): ``C`` every view's
+    homology fit's covariance (:func:`homology_covariance`), ``A`` the estimator's
+    Jacobian in the same parameters by forward-mode autodiff, at the fitted vertices
+    ``v_n`` (V, 3) moved along ``hc.b1``, ``hc.b2`` and the fitted axes.  Returns
+    ``(cov, cov_offset)`` px^2, the second the part the outline offset makes."""
+    V = hc.axes.shape[0]
+    vf = v_n / jnp.linalg.norm(v_n, axis=-1, keepdims=True)
+    vf = vf * jnp.where(jnp.sum(vf * jnp.cross(hc.b1, hc.b2), axis=-1, keepdims=True) < 0, -1.0, 1.0)
+
+    def est(p):
+        aa = hc.axes + p[:2 * V].reshape(V, 2)
+        dv = p[2 * V:].reshape(V, 2)
+        l = jnp.stack([jnp.cos(aa[:, 0]), jnp.sin(aa[:, 0]), -aa[:, 1]], axis=-1)
+        return estimate(vf + dv[:, :1] * hc.b1 + dv[:, 1:] * hc.b2, l)
+
+    A = jax.jacfwd(est)(jnp.zeros(4 * V, hc.axes.dtype))
+    return A @ hc.cov @ A.T, A @ hc.cov_offset @ A.T
 
 
 import jax.flatten_util  # noqa: E402  (registers the submodule used above)

@@ -65,6 +65,28 @@ def pole_polar_rows(v: Float[Array, "V 3"], l: Float[Array, "V 3"]) -> Float[Arr
     return rows.reshape(-1, 5)
 
 
+@jax.custom_jvp
+def null_vector(A: Float[Array, "m n"]) -> Float[Array, " n"]:
+    """The unit right singular vector of ``A``'s smallest singular value (SVD; ``m``
+    may be below ``n``), differentiable: the smallest eigenvector ``w`` of ``M = A^T
+    A``, whose derivative is ``dw = -(M - lambda_0)^+ dM w`` (first-order perturbation
+    theory, the other eigenvectors of ``M``; JAX's SVD has no derivative with
+    ``full_matrices=True``).  What the linear methods' first-order covariance
+    differentiates through."""
+    return jnp.linalg.svd(A, full_matrices=True)[2][-1]
+
+
+@null_vector.defjvp
+def _null_vector_jvp(primals, tangents):
+    (A,), (dA,) = primals, tangents
+    w = null_vector(A)
+    lam, U = jnp.linalg.eigh(A.T @ A)
+    dM = dA.T @ A + A.T @ dA
+    gap = lam - lam[0]
+    inv = jnp.where(gap > 0, 1.0 / jnp.where(gap > 0, gap, 1.0), 0.0).at[0].set(0.0)
+    return w, -(U * inv) @ (U.T @ (dM @ w))
+
+
 @functools.partial(jax.jit, static_argnames=("unit_aspect",))
 def method_ii(v, l, *, unit_aspect: bool, weights=None):
     """Method IIa (``unit_aspect=False``) or IIb (``True``).
@@ -76,10 +98,10 @@ def method_ii(v, l, *, unit_aspect: bool, weights=None):
         A = A * jnp.repeat(jnp.asarray(weights), 2)[:, None]
     if unit_aspect:
         A4 = jnp.stack([A[:, 0] + A[:, 2], A[:, 1], A[:, 3], A[:, 4]], -1)
-        w4 = jnp.linalg.svd(A4, full_matrices=True)[2][-1]
+        w4 = null_vector(A4)
         w = jnp.stack([w4[0], w4[1], w4[0], w4[2], w4[3]])
     else:
-        w = jnp.linalg.svd(A, full_matrices=True)[2][-1]
+        w = null_vector(A)
     fu, fv, u0, v0, ok = intrinsics_from_omega_vector(w)
     return fu, fv, u0, v0, ok, w
 

@@ -74,6 +74,20 @@ class Options(eqx.Module):
       exceeds ``weak_rel_std``.
     * ``outline_error_px``: systematic outline error the symmetry residual does not
       show (0.1 px: good sub-pixel outlines; 0 for synthetic studies).
+    * ``outline_offset_px``: the prior standard deviation (px) of a systematic offset
+      of the outlines along their normals shared by all of them (an eroded or dilated
+      mask, a segmenter's threshold), which the symmetry residuals do not show.  The
+      bundle estimates it as a nuisance with this prior, at the larger of this and
+      ``outline_error_px`` (:func:`sorjax.core._covariance.offset_fit`): where
+      perspective makes it visible its effect on the intrinsics is removed and its
+      estimate's uncertainty widens the covariance, elsewhere the prior does; the
+      linear methods' covariance includes the prior's effect.  0 by default (the
+      outline error's 0.1 px then); outlines traced from masks carry
+      :data:`sorjax.MASK_OFFSET_PX` (1 px, ``ImageOutline.outline_offset``), and
+      :func:`sorjax.calibrate` takes the largest.  Measured (experiments/outline_bias.py,
+      five cameras of photo-like renders, masks eroded or dilated by up to 2 px):
+      the focal length moved 0.68 % of f per px of offset without the estimate,
+      0.03 % with it.
     * ``measured_undetermined``: with outlines of measured quality (the shell's
       ``calibrate(outline_error="measured")``, outlines found in photographs) an
       intrinsic counts as determined only when its standard deviation, widened by the
@@ -99,12 +113,33 @@ class Options(eqx.Module):
 
     * ``consistency_z``: a known aspect ratio is rejected when the free-aspect bundle
       puts it this many standard deviations away (Wald).
+    * ``linear_aspect_z``: the aspect ratio Methods I and IIb impose (1, or the known
+      one) is not confirmed when Method IIa's free estimate puts it this many of its
+      standard deviations away; their covariance then includes the difference between
+      the two estimates, with a warning.  Lower than ``consistency_z``: Method IIa's
+      aspect ratio is several times less precise than the bundle's (measured: the
+      two-sphere scene with fu / fv = 1.1, f = 800 px, noise 0.5 px: IIa put 1 at 2.9
+      std while IIb's fu was 4.9 of its own std off; the bundle puts 1 at about 10 std).
+      About 5 % of the linear calibrations of a camera with the imposed aspect ratio
+      are widened so.
     * ``consistency_p``: the views are inconsistent with one camera when the score
       statistic of releasing every view's homology has a chi-square p-value below this.
     * ``duplicate_px``: an outline within this RMS distance (px) of an earlier one is
       the same view twice.
     * ``check_floor_px``: evidence below this RMS per sample (px) never fails a check:
       the numerical floor of the distance fields (exact outlines fit to < 4e-5 px).
+    * ``homology_ratio``: a homology passed in (the shell's ``calibrate(homologies=...)``)
+      is refused, naming its view, when its outline's RMS symmetry residual under it
+      (eq. 20 at the fit's samples, over the samples it kept) exceeds this many times its
+      own fitted residual ``Homology.rms`` (at least ``check_floor_px``): it was fitted
+      on another outline.  Measured (``experiments/user_homologies.py``, paper and
+      Gaussian noise of 0.5-2 px, four scenes): fitted on the very outline, at most 1
+      (447 fits: any ``n_samples``, robust or not, trimmed or not); on the same curve started
+      elsewhere, resampled to other ``n_points`` or smoothed by 1 px, at most 1.18; on
+      the same views seen with f = 1400 px instead of 800, median 12 and 95 % above 1.5
+      (the rest map the outline within 0.3 px of its noise; each of 69 three-view sets
+      had a view above 5.8); moved by 2-5 px, 93-99 % above 1.5 (the rest moved along the
+      axis); another view 35 and up, another object 2e4 and up.  inf: no check.
 
     Uncertainty (:func:`sorjax.core._covariance.covariance`, :mod:`sorjax.core._noise`):
 
@@ -142,15 +177,18 @@ class Options(eqx.Module):
     weak_rel_std: float = 0.05
     residual_floor_px: float = 0.1
     outline_error_px: float = 0.1
+    outline_offset_px: float = 0.0
     measured_undetermined: float = 1.0 / 60.0
     measured_leave_out: int = 2  # read by the shell only: an ordinary leaf, so changing it recompiles nothing
     measured_leave_share: float = 0.5
     perspective_z: float = 3.0
     perspective_factor: float = 3.0
     consistency_z: float = 4.0
+    linear_aspect_z: float = 2.0
     consistency_p: float = 1e-4
     duplicate_px: float = 0.25
     check_floor_px: float = 1e-3
+    homology_ratio: float = 1.5
     covariance_smooth_px: float = 6.0
     noise_ell_min_px: float = 0.25
     noise_ell_max_px: float = 32.0

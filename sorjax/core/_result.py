@@ -94,7 +94,14 @@ class CoreResult(eqx.Module):
         distortion_px, distortion_z: the evidence for distortion (the fit with ``k = 0``
             worse by this RMS per sample, px, and z-score; NaN for a pinhole).
         checks: the model checks' statistics (:class:`sorjax.core._checks.ModelChecks`;
-            run on the bundle's estimate: a linear method's has none but the duplicates).
+            run on the bundle's estimate; a linear method's: its aspect check and the
+            duplicates).
+        outline_offset, outline_offset_std: (V,) each used outline's systematic offset
+            along its outward normals (px, positive: outward, a dilated mask), estimated
+            by the bundle as a nuisance with the prior
+            :attr:`sorjax.Options.outline_offset_px` (its effect is removed from ``K``,
+            :func:`sorjax.core._covariance.offset_fit`), and its std; NaN for the linear
+            methods and masked views.
     """
 
     K: Float[Array, "3 3"]
@@ -125,6 +132,8 @@ class CoreResult(eqx.Module):
     distortion_std: Float[Array, "2"]
     distortion_px: Float[Array, ""]
     distortion_z: Float[Array, ""]
+    outline_offset: Float[Array, " V"]
+    outline_offset_std: Float[Array, " V"]
 
     @property
     def success(self):
