@@ -523,8 +523,10 @@ def _calibrate(args) -> int:
         print(f"perspective shown by the outlines: {cal.perspective_px:.3g} px RMS (z = {cal.perspective_z:.3g}; "
               f"the focal length needs >= {3 * cal.outline_error:.3g} px, 3 x the outline error of "
               f"{cal.outline_error:.3g} px)")
-    off = np.asarray(cal.outline_offset if cal.outline_offset is not None else [], float)
-    off_std = np.asarray(cal.outline_offset_std if cal.outline_offset_std is not None else [], float)
+    off = getattr(cal, "outline_offset", None)
+    off_std = getattr(cal, "outline_offset_std", None)
+    off = np.asarray(off if off is not None else [], float)
+    off_std = np.asarray(off_std if off_std is not None else [], float)
     if off.size and np.all(np.isfinite(off)) and np.ptp(off) == 0:  # one offset shared by the outlines
         print(f"outlines' offset along their normals, estimated with K: {off[0]:+.3g} +- {off_std[0]:.2g} px "
               "(positive: outside the true edge, a dilated mask; its effect is removed from K)")
