@@ -237,8 +237,10 @@ def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Opti
     gives one).  Returns ``(y, ok, steps, residuals, (cov, s2, ell, offsets), (cost_o, y_o), lin)``:
     ``cost_o`` the reference's cost (normalised units^2) at its solution ``y_o`` (the
     chart of :func:`orthographic_problem` at ``y``); ``steps`` counts the seeds' steps;
-    ``lin`` the :class:`Linearisation` at ``y`` that the covariance read (the model
-    checks read it too)."""
+    ``lin`` the :class:`Linearisation` at ``y`` that the covariance read, its residuals
+    refitted with the outlines' estimated offset (:attr:`OutlineOffsets.refit`): what
+    the model checks read (a uniformly offset outline, an eroded or dilated mask, is no
+    evidence against the camera model once its effect on K is removed and counted)."""
     max_steps = options.bundle_max_steps
     problem = with_fixed(problem)
     used = problem.used
@@ -258,7 +260,7 @@ def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Opti
     gn, lm = _SOLVERS["gn"], _SOLVERS["lm"]
     SEED, REFERENCE, DONE = 0, 1, 2
     nan_off = OutlineOffsets(cov=jnp.full((n_cov, n_cov), jnp.nan), shift=jnp.full(n_cov, jnp.nan),
-                             value=jnp.full(V, jnp.nan), std=jnp.full(V, jnp.nan))
+                             value=jnp.full(V, jnp.nan), std=jnp.full(V, jnp.nan), refit=jnp.full(n_res, jnp.nan))
     nan_cov = (jnp.full((n_cov, n_cov), jnp.nan), jnp.asarray(jnp.nan), jnp.asarray(jnp.nan), jnp.full(V, jnp.nan),
                nan_off)
     N = problem.weights.shape[1]
@@ -280,7 +282,9 @@ def _fit_bundle(problem: BundleProblem, l_seeds_n, seeds, seed_ok, options: Opti
         (y_end, feet), final = final.y, final._replace(y=final.y[0])
         def at_solution():  # one Jacobian pass for the covariance and the model checks
             lin = linearise(y_end, problem, feet)
-            return covariance(y_end, problem, T, feet, options, lin), lin
+            cov = covariance(y_end, problem, T, feet, options, lin)
+            # the checks read the residuals refitted with the outlines' estimated offset
+            return cov, eqx.tree_at(lambda l: l.r, lin, lin.r - jnp.where(jnp.isfinite(cov[4].refit), cov[4].refit, 0.0))
 
         (cov, s2, step, ell, off), lin = jax.lax.cond(seed, at_solution, lambda: (nan_cov, nan_lin))
         y, ok, cost = _converged(final, problem, step)

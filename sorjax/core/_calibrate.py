@@ -33,7 +33,7 @@ from ._assess import (DUPLICATE, USED, assess, axes_intersection, outline_extent
 from ._checks import (CULPRIT_ASPECT, CULPRIT_FIXED, CULPRIT_LENS, CULPRIT_VIEWS, MODEL_CONTRADICTED, MODEL_OK,
                       MODEL_WIDENED, NO_CULPRIT, ModelChecks, aspect_of, consistency, duplicate_views,
                       fixed_aspect_check,
-                      fixed_release, lens_release, n_free_intrinsics, offset_removed, view_scores)
+                      fixed_release, lens_release, n_free_intrinsics, view_scores)
 from ._options import Options
 from ._prepare import joint_transform, prepare_views
 from ._result import RESULTS, CoreResult
@@ -159,10 +159,8 @@ def _bundle(c: _Common, homs: ViewHomologies, aspect, options: Options, fixed=No
                                base=c.problem)
     y = jax.lax.stop_gradient(out.y)
     args = (y, c.points_n, c.used, c.inliers, aspect, c.T, options)
-    # every check reads the one Jacobian pass at the solution (the covariance's), the
-    # outlines' estimated offset taken out of its residuals
-    pinned = None if fixed is None else jnp.isfinite(fixed)
-    lin = offset_removed(lin, c.problem, c.T, jax.lax.stop_gradient(jnp.where(c.used, out.offset, 0.0)), pinned)
+    # every check reads the one Jacobian pass at the solution (the covariance's), its
+    # residuals refitted with the outlines' estimated offset
     kw = dict(base=c.problem, ell=jax.lax.stop_gradient(out.noise_ell), lin=lin)
     lens = lens_release(*args, fixed, **kw)
     held = None if fixed is None else fixed_release(*args, fixed, **kw)

@@ -45,10 +45,12 @@ at the edge (:mod:`sorjax._calibration`).
    *contradicted* when also ``g_px >= perspective_factor * outline_error_px`` (a
    lens with k1 = -0.05 on off-centre objects: refused, with ``distortion="k1"`` as
    the remedy, instead of a K 7-13 % off at a std of 1 %).
-Every check reads the residuals with the outlines' systematic offset that the bundle
-estimated (:func:`sorjax.core._covariance.offset_fit`) taken out (:func:`offset_removed`):
-a mask eroded or dilated by a pixel is a known kind of error whose effect on K is
-already removed and counted in the covariance, not evidence against the camera model.
+Every check reads the bundle's residuals refitted with the outlines' systematic offset
+that it estimated (:func:`sorjax.core._covariance.offset_fit`,
+:attr:`~sorjax.core._covariance.OutlineOffsets.refit`; the :class:`Linearisation` the
+bundle returns): a mask eroded or dilated by a pixel is a known kind of error whose effect
+on K is already removed and counted in the covariance, not evidence against the camera
+model.
 
 4. **Duplicated views** (:func:`duplicate_views`): an outline within
    ``duplicate_px`` RMS of an earlier one is the same view twice (it would shrink the
@@ -66,7 +68,7 @@ from jax.scipy.special import gammaincc
 from jaxtyping import Array, Bool, Float, Int
 
 from ._covariance import (Linearisation, chart_jacobian, floored_rss, lin_axis_columns, lin_vertex_columns, linearise,
-                          noise_blocks, noise_geometry_at, project_out, residual_jacobian, residual_variance)
+                          noise_blocks, project_out, residual_jacobian, residual_variance)
 from ._model import (BundleProblem, fixed_chart, free_intrinsics, make_problem, pin_intrinsics, pixel_params, with_model)
 from ._noise import noise_meat
 from ._options import Options
@@ -169,24 +171,6 @@ def duplicate_views(points: Float[Array, "V M 2"], valid: Bool[Array, " V"], opt
     d = jax.lax.cond(jnp.any(cand), distances, lambda: jnp.full((V, V), jnp.inf))
     same = cand & (d <= options.duplicate_px)
     return jnp.where(jnp.any(same, axis=1), jnp.argmax(same, axis=1), -1).astype(jnp.int32)
-
-
-def offset_removed(lin: Linearisation, problem: BundleProblem, T, offset_px, held=None) -> Linearisation:
-    """``lin`` with the residuals of the bundle refitted to first order with the
-    outlines moved back by their estimated offset ``offset_px`` (V,) px along their
-    outward normals (:attr:`sorjax.core._bundle.BundleOut.offset`; 0 for views not
-    used): ``r - P b``, ``b = (a - w) delta`` the residuals' change for that offset
-    (:func:`sorjax.core._covariance.offset_columns`, on ``problem``'s unsmoothed
-    geometry) and ``P`` the projection off the columns of the bundle's model
-    (:func:`sorjax.core._covariance.chart_jacobian`, the intrinsics ``held`` (4,) bool
-    zeroed), so that the model is refitted with it.  What the model checks read: a
-    uniformly offset outline (an eroded or dilated mask) is not evidence against the
-    camera model once its effect on K is estimated and in the covariance (measured:
-    ``experiments/outline_bias.py``)."""
-    geo = noise_geometry_at(problem, lin.feet, 1.0 / T[0, 0], lin.a)
-    b = ((geo.a - geo.w) * (offset_px * T[0, 0])[:, None]).reshape(-1, 1)
-    b = project_out(b, chart_jacobian(lin, held))[:, 0]
-    return eqx.tree_at(lambda l: l.r, lin, lin.r - jnp.where(jnp.isfinite(b), b, 0.0))
 
 
 def view_scores(y, points_n, used, inliers, aspect, T, options: Options, fixed=None, base=None, *, ell,

@@ -255,7 +255,7 @@ def covariance(y, problem: BundleProblem, T, feet=None, options: Options = Optio
     cov = jnp.where(bad, jnp.nan, cov)
     cov = jnp.where(jnp.eye(cov.shape[0], dtype=bool) & bad, jnp.inf, cov)
     off = OutlineOffsets(cov=jnp.where(bad, 0.0, cov_off), shift=jnp.where(undetermined, 0.0, shift),
-                         value=fit.value * scale, std=fit.std * scale)
+                         value=fit.value * scale, std=fit.std * scale, refit=fit.refit)
     return cov, s2, step, ell, off
 
 
@@ -288,12 +288,18 @@ class OutlineOffsets(eqx.Module):
         value: (V,) each outline's estimated offset (px, outward positive: a dilated
             mask): the shared part plus its own.
         std: (V,) its standard deviation (px).
+        refit: (V N,) the change of the residuals when the bundle is refitted to first
+            order with the outlines moved back by the estimated offset, ``B_P delta``
+            (normalised units; :func:`offset_fit`): the model checks read ``r -
+            refit`` (a uniformly offset outline is no evidence against the camera model
+            once its effect on K is removed and counted).
     """
 
     cov: Float[Array, "n n"]
     shift: Float[Array, " n"]
     value: Float[Array, " V"]
     std: Float[Array, " V"]
+    refit: Float[Array, " VN"]
 
 
 class _OffsetFit(NamedTuple):
@@ -302,6 +308,7 @@ class _OffsetFit(NamedTuple):
     score: Array
     value: Array
     std: Array
+    refit: Array
 
 
 def offset_columns(geo: NoiseGeometry) -> Float[Array, "VN P"]:
@@ -334,8 +341,13 @@ def offset_fit(G, J, geo: NoiseGeometry, r, s2, sigma) -> _OffsetFit:
     is left of the true offset): the meat ``N Lambda N^T`` here, the noise's read
     off ``G_eff``.  ``sigma = 0``: nothing estimated, ``G_eff = G``, no meat.
 
-    Returns ``G_eff``, the offset's meat, the score, and each outline's offset (shared
-    plus own) with its standard deviation (the posterior's, normalised units)."""
+    The residuals of the bundle refitted with the offset (to first order: the
+    intrinsics and pairs move by ``-(J^T J)^-1 J^T B delta``, ``r`` being orthogonal to
+    ``J`` at the optimum) are ``r - B_P delta``.
+
+    Returns ``G_eff``, the offset's meat, the score, each outline's offset (shared
+    plus own) with its standard deviation (the posterior's, normalised units), and
+    ``B_P delta`` (``refit``)."""
     B = offset_columns(geo)
     P = B.shape[1]
     B_P = project_out(B, J)
@@ -351,7 +363,7 @@ def offset_fit(G, J, geo: NoiseGeometry, r, s2, sigma) -> _OffsetFit:
     post = jnp.maximum(s2, 0.0) * H  # the offsets' posterior covariance (white noise)
     u = jnp.concatenate([jnp.ones((P - 1, 1)), jnp.eye(P - 1)], axis=1)  # each outline: shared + own
     return _OffsetFit(G=G - B_P @ (H @ GB.T), meat=(N * prior[None, :]) @ N.T, score=GB @ delta, value=u @ delta,
-                      std=jnp.sqrt(jnp.maximum(jnp.einsum("vp,pq,vq->v", u, post, u), 0.0)))
+                      std=jnp.sqrt(jnp.maximum(jnp.einsum("vp,pq,vq->v", u, post, u), 0.0)), refit=B_P @ delta)
 
 
 def offset_prior(sigma, V: int):
