@@ -45,16 +45,16 @@ at the edge (:mod:`sorjax._calibration`).
    *contradicted* when also ``g_px >= perspective_factor * outline_error_px`` (a
    lens with k1 = -0.05 on off-centre objects: refused, with ``distortion="k1"`` as
    the remedy, instead of a K 7-13 % off at a std of 1 %).
-Every check reads the bundle's residuals refitted with the outlines' systematic offset
+4. **Duplicated views** (:func:`duplicate_views`): an outline within
+   ``duplicate_px`` RMS of an earlier one is the same view twice (it would shrink the
+   standard deviations by sqrt(2) while adding no information): dropped.
+
+Checks 1-3 read the bundle's residuals refitted with the outlines' systematic offset
 that it estimated (:func:`sorjax.core._covariance.offset_fit`,
 :attr:`~sorjax.core._covariance.OutlineOffsets.refit`; the :class:`Linearisation` the
 bundle returns): a mask eroded or dilated by a pixel is a known kind of error whose effect
 on K is already removed and counted in the covariance, not evidence against the camera
 model.
-
-4. **Duplicated views** (:func:`duplicate_views`): an outline within
-   ``duplicate_px`` RMS of an earlier one is the same view twice (it would shrink the
-   standard deviations by sqrt(2) while adding no information): dropped.
 """
 
 from __future__ import annotations
