@@ -49,7 +49,7 @@ at the edge (:mod:`sorjax._calibration`).
    ``duplicate_px`` RMS of an earlier one is the same view twice (it would shrink the
    standard deviations by sqrt(2) while adding no information): dropped.
 
-Checks 1-3 read the bundle's residuals refitted with the outlines' systematic offset
+Checks 2 and 3 read the bundle's residuals refitted with the outlines' systematic offset
 that it estimated (:func:`sorjax.core._covariance.offset_fit`,
 :attr:`~sorjax.core._covariance.OutlineOffsets.refit`; the :class:`Linearisation` the
 bundle returns): a mask eroded or dilated by a pixel is a known kind of error whose effect
